@@ -1,0 +1,363 @@
+//! The state of one soft body: particles, springs, and the stages of a step that do not
+//! involve volume impulses or contacts (those are in `impulses.rs` and `contacts.rs`).
+//!
+//! A step is, in this order (the Bevy plugin runs each stage in its own system set):
+//! 1. [`SoftBodyState::apply_forces`]: gravity, springs with damping and, for the baseline,
+//!    the per-tet volume forces change the velocities; kinematic particles get the velocity
+//!    that takes them to their target.
+//! 2. Contacts (`contacts.rs`): velocities are changed so that the previewed positions
+//!    `x + h v` lie outside every collider. The volume passes then see the contact.
+//! 3. [`SoftBodyState::one_ring_pass`] and 4. [`SoftBodyState::per_tet_pass`]: the paper's
+//!    volume impulses on the previewed positions.
+//! 5. [`SoftBodyState::apply_plasticity`]: plastic springs.
+//! 6. Contacts again, then [`SoftBodyState::integrate_positions`]: `x += h v`. The second
+//!    contact pass undoes whatever the volume impulses pushed into a collider, so no particle
+//!    ends a step inside one.
+
+use std::sync::Arc;
+
+use glam::Vec3;
+
+use super::geometry::{signed_volume, volume_gradients};
+use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
+use super::tet_mesh::TetMesh;
+
+/// A particle index that does not exist in the body's mesh.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
+#[error("particle {index} does not exist: the body has {count} particles")]
+pub struct ParticleIndexError {
+    /// The index given.
+    pub index: usize,
+    /// How many particles there are.
+    pub count: usize,
+}
+
+/// Volume measurements of a body in its current state.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct VolumeMetrics {
+    /// Sum of the signed tet volumes.
+    pub volume: f64,
+    /// Sum of the rest volumes.
+    pub rest_volume: f64,
+    /// `100 * (volume - rest_volume) / rest_volume`: signed, the paper's Figure 2.
+    pub volume_error_pct: f64,
+    /// Mean over tets of `100 * |V - V0| / V0`: a body crushed in one place and inflated in
+    /// another has a small total error but a large mean.
+    pub mean_abs_tet_error_pct: f64,
+    /// Tets with negative volume.
+    pub inverted_tets: usize,
+}
+
+/// What the volume passes did in the last step (for statistics and tests).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StepCounters {
+    /// Rings whose impulse was applied.
+    pub rings_corrected: u32,
+    /// Rings whose cubic had no positive root: no impulse was applied to them.
+    pub rings_without_root: u32,
+    /// Rings whose impulse the neighbour clamp shortened.
+    pub rings_clamped: u32,
+    /// Tets whose per-tet cubic had no positive root.
+    pub tets_without_root: u32,
+    /// Tets whose per-tet impulse the neighbour clamp shortened.
+    pub tets_clamped: u32,
+}
+
+/// One soft body: the particles of its tet mesh and the springs on its edges.
+#[derive(Clone, Debug)]
+pub struct SoftBodyState {
+    pub(crate) mesh: Arc<TetMesh>,
+    pub(crate) positions: Vec<Vec3>,
+    pub(crate) velocities: Vec<Vec3>,
+    pub(crate) masses: Vec<f32>,
+    /// Inverse masses as used in this step: zero for kinematic particles.
+    pub(crate) inv_masses: Vec<f32>,
+    /// This step's kinematic particles and where they must be at its end.
+    kinematic: Vec<(u32, Vec3)>,
+    /// Rest lengths at creation (`D0`).
+    spring_rest0: Vec<f32>,
+    /// Current rest lengths (differ from `spring_rest0` only through plasticity).
+    pub(crate) spring_rest: Vec<f32>,
+    /// Plastic strain `e_p` of each spring.
+    plastic_strain: Vec<f32>,
+    pub(crate) material: SoftBodyMaterial,
+    /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
+    /// passes. Kept zero between uses so that the passes never clear the whole array.
+    pub(crate) scratch: Vec<Vec3>,
+    pub(crate) counters: StepCounters,
+}
+
+impl SoftBodyState {
+    /// A body at the mesh's rest positions, at rest.
+    pub fn new(mesh: Arc<TetMesh>, material: SoftBodyMaterial) -> Result<Self, MaterialError> {
+        material.validate()?;
+        let n = mesh.vertex_count();
+        let spring_rest0: Vec<f32> = mesh
+            .edges()
+            .iter()
+            .map(|&[i, j]| mesh.positions()[i as usize].distance(mesh.positions()[j as usize]))
+            .collect();
+        let mut body = SoftBodyState {
+            positions: mesh.positions().to_vec(),
+            velocities: vec![Vec3::ZERO; n],
+            masses: vec![0.0; n],
+            inv_masses: vec![0.0; n],
+            kinematic: Vec::new(),
+            spring_rest: spring_rest0.clone(),
+            plastic_strain: vec![0.0; spring_rest0.len()],
+            spring_rest0,
+            material,
+            scratch: vec![Vec3::ZERO; n],
+            counters: StepCounters::default(),
+            mesh,
+        };
+        body.update_masses();
+        Ok(body)
+    }
+
+    fn update_masses(&mut self) {
+        self.masses.iter_mut().for_each(|m| *m = 0.0);
+        for (tet, &v0) in self.mesh.tets().iter().zip(self.mesh.rest_volumes()) {
+            for &i in tet {
+                self.masses[i as usize] += 0.25 * self.material.density * v0;
+            }
+        }
+        for (w, &m) in self.inv_masses.iter_mut().zip(&self.masses) {
+            *w = 1.0 / m;
+        }
+        for &(i, _) in &self.kinematic {
+            self.inv_masses[i as usize] = 0.0;
+        }
+    }
+
+    /// The tet mesh.
+    pub fn mesh(&self) -> &Arc<TetMesh> {
+        &self.mesh
+    }
+
+    /// Particle positions.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// Particle velocities.
+    pub fn velocities(&self) -> &[Vec3] {
+        &self.velocities
+    }
+
+    /// Particle velocities, to push a body around.
+    pub fn velocities_mut(&mut self) -> &mut [Vec3] {
+        &mut self.velocities
+    }
+
+    /// Particle masses.
+    pub fn masses(&self) -> &[f32] {
+        &self.masses
+    }
+
+    /// Moves every particle by `offset` (the rest state is unchanged).
+    pub fn translate(&mut self, offset: Vec3) {
+        self.positions.iter_mut().for_each(|p| *p += offset);
+    }
+
+    /// Maps every particle through `f` (for placing a body); the rest state is unchanged, so a
+    /// map that is not a rigid motion is a deformation the body will undo.
+    pub fn map_positions(&mut self, f: impl Fn(Vec3) -> Vec3) {
+        self.positions.iter_mut().for_each(|p| *p = f(*p));
+    }
+
+    /// The material.
+    pub fn material(&self) -> &SoftBodyMaterial {
+        &self.material
+    }
+
+    /// Replaces the material (live edits); masses follow a change of density.
+    pub fn set_material(&mut self, material: SoftBodyMaterial) -> Result<(), MaterialError> {
+        material.validate()?;
+        let density_changed = material.density != self.material.density;
+        self.material = material;
+        if density_changed {
+            self.update_masses();
+        }
+        Ok(())
+    }
+
+    /// What the volume passes did in the last step.
+    pub fn counters(&self) -> StepCounters {
+        self.counters
+    }
+
+    /// Current rest length of each spring (one per mesh edge), after plasticity.
+    pub fn spring_rest_lengths(&self) -> &[f32] {
+        &self.spring_rest
+    }
+
+    /// Frees every particle made kinematic for the last step.
+    pub fn clear_kinematic(&mut self) {
+        for &(i, _) in &self.kinematic {
+            self.inv_masses[i as usize] = 1.0 / self.masses[i as usize];
+        }
+        self.kinematic.clear();
+    }
+
+    /// Makes particle `index` kinematic for the coming step: it ignores forces, impulses and
+    /// contacts and moves to `target` by the end of the step. Pinned particles use their own
+    /// position as target; driven particles a moving one.
+    pub fn set_kinematic(&mut self, index: usize, target: Vec3) -> Result<(), ParticleIndexError> {
+        if index >= self.positions.len() {
+            return Err(ParticleIndexError {
+                index,
+                count: self.positions.len(),
+            });
+        }
+        self.inv_masses[index] = 0.0;
+        self.kinematic.push((index as u32, target));
+        Ok(())
+    }
+
+    /// Starts a step: clears the counters.
+    pub fn begin_step(&mut self) {
+        self.counters = StepCounters::default();
+    }
+
+    /// Stage 1: external, spring and (baseline) volume forces change the velocities.
+    pub fn apply_forces(&mut self, h: f32, gravity: Vec3) {
+        let forces = &mut self.scratch;
+        let x = &self.positions;
+        let v = &self.velocities;
+        let k_d = self.material.distance_stiffness;
+        let damping = self.material.damping;
+        for (e, &[i, j]) in self.mesh.edges().iter().enumerate() {
+            let (i, j) = (i as usize, j as usize);
+            let delta = x[j] - x[i];
+            let length = delta.length();
+            if length <= f32::EPSILON * self.spring_rest[e] {
+                continue;
+            }
+            let dir = delta / length;
+            let rest = self.spring_rest[e];
+            let magnitude =
+                k_d * (length - rest) / (rest * rest) + damping * (v[j] - v[i]).dot(dir);
+            let f = dir * magnitude;
+            forces[i] += f;
+            forces[j] -= f;
+        }
+        if let VolumeMethod::Baseline { volume_stiffness } = self.material.method {
+            for (tet, &v0) in self.mesh.tets().iter().zip(self.mesh.rest_volumes()) {
+                let p = tet.map(|i| x[i as usize]);
+                let c = (signed_volume(&p) - v0) / v0;
+                let g = volume_gradients(&p);
+                let scale = -volume_stiffness * c / v0;
+                for k in 0..4 {
+                    forces[tet[k] as usize] += g[k] * scale;
+                }
+            }
+        }
+        for ((vel, f), &w) in self
+            .velocities
+            .iter_mut()
+            .zip(forces.iter_mut())
+            .zip(&self.inv_masses)
+        {
+            if w > 0.0 {
+                *vel += h * (gravity + *f * w);
+            }
+            *f = Vec3::ZERO;
+        }
+        for &(i, target) in &self.kinematic {
+            let i = i as usize;
+            self.velocities[i] = (target - self.positions[i]) / h;
+        }
+    }
+
+    /// Stage 5: plastic flow of the spring rest lengths (no-op without plasticity).
+    pub fn apply_plasticity(&mut self, h: f32) {
+        let Some(p) = self.material.plasticity else {
+            return;
+        };
+        for (e, &[i, j]) in self.mesh.edges().iter().enumerate() {
+            let length = self.positions[i as usize].distance(self.positions[j as usize]);
+            let rest0 = self.spring_rest0[e];
+            let strain = (length - rest0) / rest0;
+            let plastic = &mut self.plastic_strain[e];
+            let elastic = strain - *plastic;
+            if elastic.abs() > p.yield_strain {
+                *plastic += h * p.creep * elastic;
+            }
+            *plastic = plastic.clamp(-p.max_strain, p.max_strain);
+            self.spring_rest[e] = rest0 * (1.0 + *plastic);
+        }
+    }
+
+    /// Stage 6: `x += h v`.
+    pub fn integrate_positions(&mut self, h: f32) {
+        for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
+            *x += h * *v;
+        }
+    }
+
+    /// Previewed position of particle `i`: where it ends the step with its current velocity.
+    #[inline]
+    pub(crate) fn preview(&self, i: u32, h: f32) -> Vec3 {
+        self.positions[i as usize] + h * self.velocities[i as usize]
+    }
+
+    /// Volume error, mean per-tet error and inverted tets of the current positions.
+    pub fn volume_metrics(&self) -> VolumeMetrics {
+        let mut volume = 0.0f64;
+        let mut abs_err = 0.0f64;
+        let mut inverted_tets = 0;
+        for (tet, &v0) in self.mesh.tets().iter().zip(self.mesh.rest_volumes()) {
+            let v = signed_volume(&tet.map(|i| self.positions[i as usize]));
+            volume += v as f64;
+            abs_err += ((v - v0) / v0).abs() as f64;
+            if v < 0.0 {
+                inverted_tets += 1;
+            }
+        }
+        let rest_volume = self.mesh.total_rest_volume();
+        VolumeMetrics {
+            volume,
+            rest_volume,
+            volume_error_pct: 100.0 * (volume - rest_volume) / rest_volume,
+            mean_abs_tet_error_pct: 100.0 * abs_err / self.mesh.tet_count() as f64,
+            inverted_tets,
+        }
+    }
+
+    /// Total mass.
+    pub fn total_mass(&self) -> f32 {
+        self.masses.iter().sum()
+    }
+
+    /// Centre of mass of the particles.
+    pub fn centre_of_mass(&self) -> Vec3 {
+        let m: f32 = self.total_mass();
+        self.positions
+            .iter()
+            .zip(&self.masses)
+            .map(|(&p, &mi)| p * mi)
+            .sum::<Vec3>()
+            / m
+    }
+
+    /// Linear momentum of the particles.
+    pub fn linear_momentum(&self) -> Vec3 {
+        self.velocities
+            .iter()
+            .zip(&self.masses)
+            .map(|(&v, &m)| v * m)
+            .sum()
+    }
+
+    /// Runs a whole step without colliders (stages 1, 3, 4, 5, 6): for tests and benchmarks of
+    /// the core. The Bevy plugin runs the stages itself, with contacts between them.
+    pub fn step_free(&mut self, h: f32, gravity: Vec3) {
+        self.begin_step();
+        self.apply_forces(h, gravity);
+        self.one_ring_pass(h);
+        self.per_tet_pass(h);
+        self.apply_plasticity(h);
+        self.integrate_positions(h);
+    }
+}

@@ -1,0 +1,194 @@
+//! Contacts of particles with static colliders (any parry shape) and with dynamic rigid
+//! spheres, at the velocity level.
+//!
+//! A contact is resolved on the previewed position `xp = x + h v`: when `xp` is inside a
+//! collider, the velocity gets the normal change that puts `xp` on the surface, and friction
+//! removes tangential velocity up to `mu` times that normal change (Coulomb). Against a sphere
+//! the change is shared by inverse mass, so the sphere is pushed back (two-way coupling) and
+//! momentum is conserved. Kinematic particles (inverse mass zero) are not touched.
+//!
+//! The combined friction of two surfaces is the geometric mean of their coefficients.
+
+use glam::Vec3;
+use parry3d::bounding_volume::Aabb;
+use parry3d::math::Pose;
+use parry3d::query::contact;
+use parry3d::shape::{Ball, Shape};
+
+use super::body::SoftBodyState;
+
+/// A static collider as the contact stage sees it.
+pub struct StaticColliderRef<'a> {
+    /// Its shape.
+    pub shape: &'a dyn Shape,
+    /// Its pose in the world.
+    pub pose: Pose,
+    /// Its world bounds (from [`StaticColliderRef::new`]), to skip far particles cheaply.
+    pub aabb: Aabb,
+    /// Its friction coefficient.
+    pub friction: f32,
+}
+
+impl<'a> StaticColliderRef<'a> {
+    /// A collider of `shape` at `pose`.
+    pub fn new(shape: &'a dyn Shape, pose: Pose, friction: f32) -> Self {
+        StaticColliderRef {
+            aabb: shape.compute_aabb(&pose),
+            shape,
+            pose,
+            friction,
+        }
+    }
+}
+
+/// A dynamic rigid sphere as the solver sees it: it does not rotate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RigidSphereState {
+    /// Centre.
+    pub position: Vec3,
+    /// Velocity of the centre.
+    pub velocity: Vec3,
+    /// Radius.
+    pub radius: f32,
+    /// Inverse mass (zero: immovable).
+    pub inv_mass: f32,
+    /// Friction coefficient.
+    pub friction: f32,
+}
+
+#[inline]
+fn combined_friction(a: f32, b: f32) -> f32 {
+    (a * b).sqrt()
+}
+
+/// Removes tangential velocity `vt` up to `limit`.
+#[inline]
+fn friction_change(vt: Vec3, limit: f32) -> Vec3 {
+    let len = vt.length();
+    if len > 0.0 {
+        -vt * (limit.min(len) / len)
+    } else {
+        Vec3::ZERO
+    }
+}
+
+impl SoftBodyState {
+    /// Pushes previewed positions out of static colliders. Returns the number of contacts.
+    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[StaticColliderRef]) -> u32 {
+        let mut contacts = 0;
+        let friction = self.material.friction;
+        for i in 0..self.positions.len() {
+            if self.inv_masses[i] == 0.0 {
+                continue;
+            }
+            for c in colliders {
+                let xp = self.positions[i] + h * self.velocities[i];
+                if !c.aabb.contains_local_point(xp) {
+                    continue;
+                }
+                let projection = c.shape.project_point(&c.pose, xp, false);
+                if !projection.is_inside {
+                    continue;
+                }
+                let delta = projection.point - xp;
+                let depth = delta.length();
+                if depth <= 0.0 {
+                    continue;
+                }
+                let n = delta / depth;
+                let dvn = depth / h;
+                let mut v = self.velocities[i] + n * dvn;
+                let vt = v - n * v.dot(n);
+                v += friction_change(vt, combined_friction(friction, c.friction) * dvn);
+                self.velocities[i] = v;
+                contacts += 1;
+            }
+        }
+        contacts
+    }
+
+    /// Pushes previewed positions out of the (previewed) rigid spheres, pushing the spheres
+    /// back. Returns the number of contacts.
+    pub fn resolve_sphere_contacts(&mut self, h: f32, spheres: &mut [RigidSphereState]) -> u32 {
+        let mut contacts = 0;
+        let friction = self.material.friction;
+        for s in spheres.iter_mut() {
+            let reach = s.radius + h * s.velocity.length();
+            let centre_now = s.position;
+            for i in 0..self.positions.len() {
+                let w = self.inv_masses[i];
+                if w == 0.0
+                    || self.positions[i].distance_squared(centre_now)
+                        > (reach + h * self.velocities[i].length()).powi(2)
+                {
+                    continue;
+                }
+                let xp = self.positions[i] + h * self.velocities[i];
+                let cp = s.position + h * s.velocity;
+                let offset = xp - cp;
+                let dist = offset.length();
+                if dist >= s.radius {
+                    continue;
+                }
+                let n = if dist > 0.0 { offset / dist } else { Vec3::Y };
+                let w_sum = w + s.inv_mass;
+                let lambda = (s.radius - dist) / h / w_sum;
+                self.velocities[i] += n * (lambda * w);
+                s.velocity -= n * (lambda * s.inv_mass);
+                let rel = self.velocities[i] - s.velocity;
+                let vt = rel - n * rel.dot(n);
+                let vt_len = vt.length();
+                if vt_len > 0.0 {
+                    let jt = (vt_len / w_sum).min(combined_friction(friction, s.friction) * lambda);
+                    let t = vt / vt_len;
+                    self.velocities[i] -= t * (jt * w);
+                    s.velocity += t * (jt * s.inv_mass);
+                }
+                contacts += 1;
+            }
+        }
+        contacts
+    }
+}
+
+impl RigidSphereState {
+    /// Gravity on the sphere (stage 1).
+    pub fn apply_forces(&mut self, h: f32, gravity: Vec3) {
+        if self.inv_mass > 0.0 {
+            self.velocity += h * gravity;
+        }
+    }
+
+    /// Pushes the previewed sphere out of static colliders. Returns the number of contacts.
+    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[StaticColliderRef]) -> u32 {
+        if self.inv_mass == 0.0 {
+            return 0;
+        }
+        let ball = Ball::new(self.radius);
+        let mut contacts = 0;
+        for c in colliders {
+            let pose = Pose::from_translation(self.position + h * self.velocity);
+            // Unsupported shape pairs cannot occur for a ball against parry's shapes; if one
+            // does, the sphere passes through that collider rather than stopping the game.
+            let Ok(Some(hit)) = contact(&c.pose, c.shape, &pose, &ball, 0.0) else {
+                continue;
+            };
+            if hit.dist >= 0.0 {
+                continue;
+            }
+            let n = hit.normal1;
+            let dvn = -hit.dist / h;
+            let mut v = self.velocity + n * dvn;
+            let vt = v - n * v.dot(n);
+            v += friction_change(vt, combined_friction(self.friction, c.friction) * dvn);
+            self.velocity = v;
+            contacts += 1;
+        }
+        contacts
+    }
+
+    /// `x += h v`.
+    pub fn integrate_position(&mut self, h: f32) {
+        self.position += h * self.velocity;
+    }
+}

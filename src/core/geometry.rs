@@ -1,0 +1,126 @@
+//! Signed tet volumes, their gradients, and the volume of a tet whose vertices move along
+//! directions as a cubic in the step length (the paper's Eq. for `V(k_V)`).
+
+use glam::Vec3;
+
+use super::roots::Cubic;
+
+/// `u . (v x w)`.
+#[inline]
+pub fn triple(u: Vec3, v: Vec3, w: Vec3) -> f32 {
+    u.dot(v.cross(w))
+}
+
+/// Signed volume of the tet `(a, b, c, d)`: positive when `a` lies on the side of the
+/// triangle `(b, c, d)` that its counter-clockwise normal points away from; the mesh orients
+/// every tet so that its rest volume is positive.
+#[inline]
+pub fn signed_volume(p: &[Vec3; 4]) -> f32 {
+    triple(p[0] - p[3], p[1] - p[3], p[2] - p[3]) / 6.0
+}
+
+/// Gradients of [`signed_volume`] with respect to each vertex. They sum to zero, which is what
+/// makes every volume impulse conserve momentum.
+#[inline]
+pub fn volume_gradients(p: &[Vec3; 4]) -> [Vec3; 4] {
+    let (ea, eb, ec) = (p[0] - p[3], p[1] - p[3], p[2] - p[3]);
+    let ga = eb.cross(ec) / 6.0;
+    let gb = ec.cross(ea) / 6.0;
+    let gc = ea.cross(eb) / 6.0;
+    [ga, gb, gc, -(ga + gb + gc)]
+}
+
+/// Coefficients of `V(s)`, the volume of the tet with vertices `p_i + s * d_i`.
+/// A vertex that does not move has `d_i = 0`, which lowers the degree as the paper describes.
+#[inline]
+pub fn volume_polynomial(p: &[Vec3; 4], d: &[Vec3; 4]) -> Cubic {
+    let (ea, eb, ec) = (p[0] - p[3], p[1] - p[3], p[2] - p[3]);
+    let (fa, fb, fc) = (d[0] - d[3], d[1] - d[3], d[2] - d[3]);
+    let c0 = triple(ea, eb, ec);
+    let c1 = triple(fa, eb, ec) + triple(ea, fb, ec) + triple(ea, eb, fc);
+    let c2 = triple(ea, fb, fc) + triple(fa, eb, fc) + triple(fa, fb, ec);
+    let c3 = triple(fa, fb, fc);
+    let sixth = 1.0 / 6.0;
+    [
+        c0 as f64 * sixth,
+        c1 as f64 * sixth,
+        c2 as f64 * sixth,
+        c3 as f64 * sixth,
+    ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::roots::eval;
+
+    fn rand_vec(seed: &mut u64) -> Vec3 {
+        let mut next = || {
+            *seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((*seed >> 40) as f32) / ((1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        Vec3::new(next(), next(), next())
+    }
+
+    #[test]
+    fn unit_tet_volume_and_gradients() {
+        let p = [Vec3::X, Vec3::Y, Vec3::Z, Vec3::ZERO];
+        assert!((signed_volume(&p) - 1.0 / 6.0).abs() < 1e-7);
+        let g = volume_gradients(&p);
+        let sum = g.iter().copied().sum::<Vec3>();
+        assert!(sum.length() < 1e-7);
+        // Moving a along its gradient grows the volume at the gradient's squared length.
+        let eps = 1e-3;
+        let mut q = p;
+        q[0] += g[0] * eps;
+        let dv = signed_volume(&q) - signed_volume(&p);
+        assert!((dv - eps * g[0].length_squared()).abs() < 1e-6);
+    }
+
+    #[test]
+    fn cubic_coefficients_match_direct_volume_evaluation() {
+        let mut seed = 3;
+        for _ in 0..500 {
+            let p = [
+                rand_vec(&mut seed),
+                rand_vec(&mut seed),
+                rand_vec(&mut seed),
+                rand_vec(&mut seed),
+            ];
+            let mut d = [
+                rand_vec(&mut seed),
+                rand_vec(&mut seed),
+                rand_vec(&mut seed),
+                rand_vec(&mut seed),
+            ];
+            // Some vertices fixed, as for a neighbour that shares only part of its vertices.
+            let fixed = (seed >> 20) as usize % 4;
+            for v in d.iter_mut().take(fixed) {
+                *v = Vec3::ZERO;
+            }
+            let c = volume_polynomial(&p, &d);
+            if fixed == 3 {
+                assert!(
+                    c[2].abs() < 1e-6 && c[3].abs() < 1e-6,
+                    "one moving vertex is linear"
+                );
+            }
+            for s in [-1.5f32, -0.3, 0.0, 0.25, 0.7, 1.0, 2.0] {
+                let moved = [
+                    p[0] + d[0] * s,
+                    p[1] + d[1] * s,
+                    p[2] + d[2] * s,
+                    p[3] + d[3] * s,
+                ];
+                let direct = signed_volume(&moved) as f64;
+                let poly = eval(&c, s as f64);
+                assert!(
+                    (direct - poly).abs() < 1e-5 * (1.0 + direct.abs()),
+                    "s={s}: {direct} vs {poly}"
+                );
+            }
+        }
+    }
+}

@@ -1,0 +1,259 @@
+//! The paper's volume impulses (sections 4 and 5) and the neighbour clamp.
+//!
+//! Both passes work on previewed positions `xp = x + h v` and change velocities only, in
+//! Gauss-Seidel order: each impulse sees every impulse applied before it in the same pass.
+//!
+//! Directions. For a tet `t` with volume error `C_t = vol(xp) - V0_t`, the paper's impulse of
+//! magnitude `k` moves vertex `i` by `k * d_i` with `d_i = -h^2 w_i C_t grad_i`. Only the
+//! direction matters (the step length is solved for), so the common factor `h^2` is dropped.
+//! Because the gradients of a tet sum to zero, `sum m_i d_i = 0` among free particles, and so
+//! every impulse conserves momentum whatever its size.
+//!
+//! Decisions where the paper is silent:
+//! - Cubic without positive root: no impulse (counted in [`StepCounters`]); the next step
+//!   tries again from new positions. Forcing a step there could only overshoot.
+//! - All directions zero (ring at rest volume, or all its particles kinematic): skipped.
+//! - A tet touched by an impulse that is already below `eps = V0 / 2` must not get smaller:
+//!   its floor becomes its current volume, so the clamp stops the impulse where that tet would
+//!   start to shrink (possibly at once).
+//! - The per-tet correction is clamped at the step actually applied (`gamma * s*`), not at
+//!   `s*`: only what is applied can harm a neighbour.
+//!
+//! [`StepCounters`]: super::body::StepCounters
+
+use glam::Vec3;
+
+use super::body::SoftBodyState;
+use super::geometry::{signed_volume, volume_gradients, volume_polynomial};
+use super::material::VolumeMethod;
+use super::roots::{Cubic, first_crossing, smallest_positive_root};
+
+/// What one impulse did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ImpulseOutcome {
+    /// Nothing to do: no volume error, or no free particle to move.
+    Skipped,
+    /// The cubic had no positive root: nothing applied.
+    NoRoot,
+    /// The impulse was applied with this step length (after clamping and `gamma`).
+    Applied {
+        /// The step length `s` actually applied.
+        step: f64,
+        /// Whether the neighbour clamp shortened it.
+        clamped: bool,
+    },
+}
+
+/// Fraction of the rest volume below which the clamp does not let a touched tet go (`eps`).
+pub const CLAMP_FRACTION: f32 = 0.5;
+
+impl SoftBodyState {
+    /// Stage 3: one impulse per vertex restoring the volume of its one-ring (section 5).
+    /// Does nothing for the baseline or when the one-ring switch is off.
+    pub fn one_ring_pass(&mut self, h: f32) {
+        let VolumeMethod::Impulses(settings) = self.material.method else {
+            return;
+        };
+        if !settings.one_ring {
+            return;
+        }
+        for p in 0..self.positions.len() {
+            self.ring_impulse(p, h, settings.neighbour_clamp);
+        }
+    }
+
+    /// Stage 4: one impulse per tet towards its own rest volume, scaled by `gamma` (section 4,
+    /// end of section 5). Does nothing for the baseline or when the per-tet switch is off.
+    pub fn per_tet_pass(&mut self, h: f32) {
+        let VolumeMethod::Impulses(settings) = self.material.method else {
+            return;
+        };
+        if !settings.per_tet || settings.gamma == 0.0 {
+            return;
+        }
+        for t in 0..self.mesh.tet_count() {
+            self.tet_impulse(t, h, settings.gamma as f64, settings.neighbour_clamp);
+        }
+    }
+
+    /// The one-ring impulse of vertex `p`: every particle of the ring moves by `s * D_i`, where
+    /// `D_i` sums the directions of the ring's tets that contain it, and `s` is the smallest
+    /// positive root of `sum_t V_t(s) = sum_t V0_t`.
+    pub fn ring_impulse(&mut self, p: usize, h: f32, clamp: bool) -> ImpulseOutcome {
+        let mesh = self.mesh.clone();
+        let ring = mesh.one_ring(p);
+        let vertices = mesh.ring_vertices(p);
+        let mut rest = 0.0f64;
+        let mut any = false;
+        for &t in ring {
+            let tet = mesh.tets()[t as usize];
+            let xp = tet.map(|i| self.preview(i, h));
+            let v0 = mesh.rest_volumes()[t as usize];
+            rest += v0 as f64;
+            let c = signed_volume(&xp) - v0;
+            if c == 0.0 {
+                continue;
+            }
+            let g = volume_gradients(&xp);
+            for k in 0..4 {
+                let i = tet[k] as usize;
+                let d = -self.inv_masses[i] * c * g[k];
+                self.scratch[i] += d;
+                any |= d != Vec3::ZERO;
+            }
+        }
+        if !any {
+            self.clear_directions(vertices);
+            return ImpulseOutcome::Skipped;
+        }
+        let mut poly: Cubic = [-rest, 0.0, 0.0, 0.0];
+        for &t in ring {
+            let c = self.moved_volume(mesh.tets()[t as usize], h);
+            for k in 0..4 {
+                poly[k] += c[k];
+            }
+        }
+        let Some(root) = smallest_positive_root(&poly, f64::INFINITY) else {
+            self.counters.rings_without_root += 1;
+            self.clear_directions(vertices);
+            return ImpulseOutcome::NoRoot;
+        };
+        let mut step = root;
+        if clamp {
+            let max_move = vertices
+                .iter()
+                .map(|&i| self.scratch[i as usize].length())
+                .fold(0.0f32, f32::max);
+            step = self.neighbour_clamp(
+                ring.iter().chain(mesh.ring_border_tets(p)),
+                step,
+                max_move,
+                h,
+            );
+        }
+        let clamped = step < root;
+        self.counters.rings_corrected += 1;
+        self.counters.rings_clamped += clamped as u32;
+        let scale = (step / h as f64) as f32;
+        for &i in vertices {
+            let i = i as usize;
+            self.velocities[i] += scale * self.scratch[i];
+            self.scratch[i] = Vec3::ZERO;
+        }
+        ImpulseOutcome::Applied { step, clamped }
+    }
+
+    /// The per-tet impulse of tet `t`: its four particles move by `gamma * s * d_i`, `s` being the
+    /// smallest positive root of `V_t(s) = V0_t`.
+    pub fn tet_impulse(&mut self, t: usize, h: f32, gamma: f64, clamp: bool) -> ImpulseOutcome {
+        let mesh = self.mesh.clone();
+        let tet = mesh.tets()[t];
+        let v0 = mesh.rest_volumes()[t];
+        let xp = tet.map(|i| self.preview(i, h));
+        let c = signed_volume(&xp) - v0;
+        if c == 0.0 {
+            return ImpulseOutcome::Skipped;
+        }
+        let g = volume_gradients(&xp);
+        let d: [Vec3; 4] = std::array::from_fn(|k| -self.inv_masses[tet[k] as usize] * c * g[k]);
+        if d.iter().all(|&x| x == Vec3::ZERO) {
+            return ImpulseOutcome::Skipped;
+        }
+        let mut poly = volume_polynomial(&xp, &d);
+        poly[0] -= v0 as f64;
+        let Some(root) = smallest_positive_root(&poly, f64::INFINITY) else {
+            self.counters.tets_without_root += 1;
+            return ImpulseOutcome::NoRoot;
+        };
+        let full = gamma * root;
+        let mut step = full;
+        if clamp {
+            for k in 0..4 {
+                self.scratch[tet[k] as usize] = d[k];
+            }
+            let max_move = d.iter().map(|x| x.length()).fold(0.0f32, f32::max);
+            step = self.neighbour_clamp(
+                std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
+                step,
+                max_move,
+                h,
+            );
+            for &i in &tet {
+                self.scratch[i as usize] = Vec3::ZERO;
+            }
+        }
+        let clamped = step < full;
+        self.counters.tets_clamped += clamped as u32;
+        let scale = (step / h as f64) as f32;
+        for k in 0..4 {
+            self.velocities[tet[k] as usize] += scale * d[k];
+        }
+        ImpulseOutcome::Applied { step, clamped }
+    }
+
+    /// Volume polynomial of `tet` when its particles move from their previewed positions along
+    /// the directions held in `scratch` (zero for particles that do not move).
+    #[inline]
+    fn moved_volume(&self, tet: [u32; 4], h: f32) -> Cubic {
+        let xp = tet.map(|i| self.preview(i, h));
+        let d = tet.map(|i| self.scratch[i as usize]);
+        volume_polynomial(&xp, &d)
+    }
+
+    /// The neighbour clamp: the largest `s' <= step` such that every tet in `tets` keeps at
+    /// least `eps = V0 / 2` (or, if it is already below, its current volume) for every step in
+    /// `[0, s']` along the directions in `scratch`. `max_move` is the longest direction, used
+    /// to skip tets that cannot come near their floor without solving their cubic.
+    fn neighbour_clamp<'a>(
+        &self,
+        tets: impl Iterator<Item = &'a u32>,
+        mut step: f64,
+        max_move: f32,
+        h: f32,
+    ) -> f64 {
+        let mesh = &self.mesh;
+        for &t in tets {
+            let tet = mesh.tets()[t as usize];
+            let xp = tet.map(|i| self.preview(i, h));
+            let v0 = mesh.rest_volumes()[t as usize];
+            let volume = signed_volume(&xp);
+            let floor = (CLAMP_FRACTION * v0).min(volume);
+            // Each edge vector from vertex d changes by at most 2 * delta; bound the change of
+            // the determinant from that, and skip the cubic when the floor is out of reach.
+            let delta = 2.0 * step as f32 * max_move;
+            let l = (xp[0] - xp[3])
+                .length()
+                .max((xp[1] - xp[3]).length())
+                .max((xp[2] - xp[3]).length());
+            let bound =
+                (3.0 * delta * l * l + 3.0 * delta * delta * l + delta * delta * delta) / 6.0;
+            if volume - bound > floor && volume > floor {
+                continue;
+            }
+            let mut c = self.moved_volume(tet, h);
+            if c[1] == 0.0 && c[2] == 0.0 && c[3] == 0.0 {
+                continue;
+            }
+            // Measure from the polynomial's own value at 0, so that a tet already at its floor
+            // starts exactly at zero.
+            c[0] -= if volume < CLAMP_FRACTION * v0 {
+                c[0]
+            } else {
+                (CLAMP_FRACTION * v0) as f64
+            };
+            if let Some(s) = first_crossing(&c, step) {
+                step = s;
+                if step == 0.0 {
+                    break;
+                }
+            }
+        }
+        step
+    }
+
+    fn clear_directions(&mut self, vertices: &[u32]) {
+        for &i in vertices {
+            self.scratch[i as usize] = Vec3::ZERO;
+        }
+    }
+}

@@ -1,0 +1,186 @@
+//! What a soft body is made of and which volume method keeps its volume.
+
+/// How a body keeps its volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum VolumeMethod {
+    /// The existing method the paper compares against (its section 3, Teschner et al. 2004):
+    /// a penalty force per tet from `E_V = 1/2 k_V ((V - V0) / V0)^2`.
+    Baseline {
+        /// `k_V`, the volume stiffness (the paper uses 1.4 in every scene).
+        volume_stiffness: f32,
+    },
+    /// The paper's method (sections 4 and 5): velocity impulses sized by the smallest positive
+    /// root of a cubic, in each vertex's one-ring and per tet.
+    Impulses(ImpulseSettings),
+}
+
+impl VolumeMethod {
+    /// The baseline with the paper's `k_V = 1.4`.
+    pub const PAPER_BASELINE: VolumeMethod = VolumeMethod::Baseline {
+        volume_stiffness: 1.4,
+    };
+    /// The paper's method with every part switched on.
+    pub const PAPER_IMPULSES: VolumeMethod = VolumeMethod::Impulses(ImpulseSettings::PAPER);
+
+    /// A short name for tables and logs: `baseline` or `paper`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            VolumeMethod::Baseline { .. } => "baseline",
+            VolumeMethod::Impulses(_) => "paper",
+        }
+    }
+}
+
+impl Default for VolumeMethod {
+    fn default() -> Self {
+        Self::PAPER_IMPULSES
+    }
+}
+
+/// The switches of the paper's method.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ImpulseSettings {
+    /// Restore the volume of each vertex's one-ring (section 5), once per step.
+    pub one_ring: bool,
+    /// Also correct every tet on its own, scaled by `gamma` (end of section 5), so that volume
+    /// cannot drift from one tet of a ring into another.
+    pub per_tet: bool,
+    /// The fraction of the per-tet correction applied (the paper's `gamma = 1/8`).
+    pub gamma: f32,
+    /// Shorten an impulse so that no tet it touches falls below half its rest volume
+    /// (section 4's clamp with `eps = V0 / 2`).
+    pub neighbour_clamp: bool,
+}
+
+impl ImpulseSettings {
+    /// Everything on, `gamma = 1/8`, as in the paper.
+    pub const PAPER: ImpulseSettings = ImpulseSettings {
+        one_ring: true,
+        per_tet: true,
+        gamma: 0.125,
+        neighbour_clamp: true,
+    };
+}
+
+impl Default for ImpulseSettings {
+    fn default() -> Self {
+        Self::PAPER
+    }
+}
+
+/// Plastic springs (paper section 6, last scene): a spring stretched or compressed past
+/// `yield_strain` creeps towards its current length, up to `max_strain` from the original one.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Plasticity {
+    /// Elastic strain `|e - e_p|` above which the spring starts to flow (`c_yield`).
+    pub yield_strain: f32,
+    /// Flow rate per second (`c_creep`): the fraction of the excess strain absorbed per second.
+    pub creep: f32,
+    /// Largest plastic strain `|e_p|` (`c_max`).
+    pub max_strain: f32,
+}
+
+/// Everything about a soft body's material.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SoftBodyMaterial {
+    /// Mass per unit volume; each tet gives a quarter of its mass to each vertex.
+    pub density: f32,
+    /// `k_D`, the spring stiffness of `E_D = 1/2 k_D ((L - D0) / D0)^2` on every edge.
+    pub distance_stiffness: f32,
+    /// Damping along each spring, in force per unit of relative velocity.
+    pub damping: f32,
+    /// Coulomb friction coefficient against colliders and spheres.
+    pub friction: f32,
+    /// How volume is kept.
+    pub method: VolumeMethod,
+    /// Plastic springs, if any.
+    pub plasticity: Option<Plasticity>,
+}
+
+impl Default for SoftBodyMaterial {
+    fn default() -> Self {
+        SoftBodyMaterial {
+            density: 1000.0,
+            distance_stiffness: 1.0,
+            damping: 1.0,
+            friction: 0.5,
+            method: VolumeMethod::default(),
+            plasticity: None,
+        }
+    }
+}
+
+/// What is wrong with a material.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum MaterialError {
+    /// A parameter is negative, zero where it must be positive, or not finite.
+    #[error("material parameter `{name}` must be {requirement}, got {value}")]
+    BadParameter {
+        /// The parameter.
+        name: &'static str,
+        /// What it must be.
+        requirement: &'static str,
+        /// What it was.
+        value: f32,
+    },
+}
+
+impl SoftBodyMaterial {
+    /// Checks every parameter: positive density, non-negative finite stiffness, damping and
+    /// friction, `gamma` in `[0, 1]`, sensible plasticity.
+    pub fn validate(&self) -> Result<(), MaterialError> {
+        fn positive(name: &'static str, value: f32) -> Result<(), MaterialError> {
+            if value.is_finite() && value > 0.0 {
+                Ok(())
+            } else {
+                Err(MaterialError::BadParameter {
+                    name,
+                    requirement: "positive and finite",
+                    value,
+                })
+            }
+        }
+        fn non_negative(name: &'static str, value: f32) -> Result<(), MaterialError> {
+            if value.is_finite() && value >= 0.0 {
+                Ok(())
+            } else {
+                Err(MaterialError::BadParameter {
+                    name,
+                    requirement: "zero or positive and finite",
+                    value,
+                })
+            }
+        }
+        positive("density", self.density)?;
+        non_negative("distance_stiffness", self.distance_stiffness)?;
+        non_negative("damping", self.damping)?;
+        non_negative("friction", self.friction)?;
+        match self.method {
+            VolumeMethod::Baseline { volume_stiffness } => {
+                non_negative("volume_stiffness", volume_stiffness)?
+            }
+            VolumeMethod::Impulses(s) => {
+                if !(0.0..=1.0).contains(&s.gamma) {
+                    return Err(MaterialError::BadParameter {
+                        name: "gamma",
+                        requirement: "between 0 and 1",
+                        value: s.gamma,
+                    });
+                }
+            }
+        }
+        if let Some(p) = self.plasticity {
+            non_negative("yield_strain", p.yield_strain)?;
+            non_negative("creep", p.creep)?;
+            non_negative("max_strain", p.max_strain)?;
+            if p.max_strain >= 1.0 {
+                return Err(MaterialError::BadParameter {
+                    name: "max_strain",
+                    requirement: "below 1 (a spring cannot shrink to nothing)",
+                    value: p.max_strain,
+                });
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,18 @@
+//! The simulation core: plain Rust on glam, no ECS types. Data lives in flat arrays indexed by
+//! particle, tet and edge; a step allocates nothing.
+
+pub mod body;
+pub mod contacts;
+pub mod geometry;
+pub mod grid;
+pub mod impulses;
+pub mod material;
+pub mod roots;
+pub mod tet_mesh;
+
+pub use body::{ParticleIndexError, SoftBodyState, StepCounters, VolumeMetrics};
+pub use contacts::{RigidSphereState, StaticColliderRef};
+pub use grid::{GridError, box_grid, sdf_grid};
+pub use impulses::ImpulseOutcome;
+pub use material::{ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod};
+pub use tet_mesh::{TetMesh, TetMeshError};

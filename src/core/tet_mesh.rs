@@ -1,0 +1,439 @@
+//! The tetrahedral mesh a soft body is simulated on: rest positions, tets, rest volumes,
+//! edges (the springs), and the adjacency the volume passes walk, in compact arrays.
+
+use glam::Vec3;
+
+use super::geometry::signed_volume;
+
+/// Compressed rows: row `i` is `items[offsets[i]..offsets[i + 1]]`.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Csr {
+    offsets: Vec<u32>,
+    items: Vec<u32>,
+}
+
+impl Csr {
+    /// Builds rows from a list of `(row, item)` pairs; items keep their order within a row.
+    fn from_pairs(rows: usize, pairs: &[(u32, u32)]) -> Self {
+        let mut offsets = vec![0u32; rows + 1];
+        for &(r, _) in pairs {
+            offsets[r as usize + 1] += 1;
+        }
+        for i in 0..rows {
+            offsets[i + 1] += offsets[i];
+        }
+        let mut fill = offsets.clone();
+        let mut items = vec![0u32; pairs.len()];
+        for &(r, item) in pairs {
+            items[fill[r as usize] as usize] = item;
+            fill[r as usize] += 1;
+        }
+        Csr { offsets, items }
+    }
+
+    /// Row `i`.
+    #[inline]
+    pub fn row(&self, i: usize) -> &[u32] {
+        &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
+    }
+
+    /// Number of rows.
+    pub fn len(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// Whether there are no rows.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Total number of items over all rows.
+    pub fn total(&self) -> usize {
+        self.items.len()
+    }
+}
+
+/// What is wrong with a tet mesh given to [`TetMesh::new`].
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum TetMeshError {
+    /// No vertices were given.
+    #[error("the tet mesh has no vertices")]
+    NoVertices,
+    /// No tets were given.
+    #[error("the tet mesh has no tets")]
+    NoTets,
+    /// More vertices than a `u32` index can address.
+    #[error("the tet mesh has {0} vertices, more than a u32 index can address")]
+    TooManyVertices(usize),
+    /// A coordinate is NaN or infinite.
+    #[error("vertex {vertex} has a non-finite coordinate {position:?}")]
+    NonFiniteVertex {
+        /// The vertex.
+        vertex: usize,
+        /// Its coordinates as given.
+        position: Vec3,
+    },
+    /// A tet names a vertex that does not exist.
+    #[error("tet {tet} refers to vertex {index}, but there are only {vertex_count} vertices")]
+    IndexOutOfRange {
+        /// The tet.
+        tet: usize,
+        /// The index it holds.
+        index: u32,
+        /// How many vertices there are.
+        vertex_count: usize,
+    },
+    /// A tet names the same vertex twice.
+    #[error("tet {tet} uses vertex {vertex} more than once")]
+    RepeatedVertex {
+        /// The tet.
+        tet: usize,
+        /// The repeated vertex.
+        vertex: u32,
+    },
+    /// A tet is flat (its volume is negligible against its longest edge cubed).
+    #[error("tet {tet} is degenerate: volume {volume:e} for a longest edge of {longest_edge}")]
+    DegenerateTet {
+        /// The tet.
+        tet: usize,
+        /// Its signed volume.
+        volume: f32,
+        /// Its longest edge.
+        longest_edge: f32,
+    },
+    /// A vertex belongs to no tet: it would be a particle without volume, which is almost
+    /// certainly a mistake in the input.
+    #[error("vertex {vertex} belongs to no tet")]
+    UnreferencedVertex {
+        /// The vertex.
+        vertex: usize,
+    },
+}
+
+/// A tet whose volume is below this fraction of its longest edge cubed is degenerate.
+/// A regular tet has about 0.118; slivers below 1e-6 carry no usable volume gradient in `f32`.
+const DEGENERATE_RATIO: f32 = 1e-6;
+
+/// A validated tetrahedral mesh with the adjacency the solver needs. Immutable once built;
+/// share it between bodies with an `Arc`.
+#[derive(Clone, Debug)]
+pub struct TetMesh {
+    positions: Vec<Vec3>,
+    tets: Vec<[u32; 4]>,
+    rest_volumes: Vec<f32>,
+    edges: Vec<[u32; 2]>,
+    one_rings: Csr,
+    ring_vertices: Csr,
+    ring_border_tets: Csr,
+    tet_neighbours: Csr,
+    reoriented_tets: usize,
+}
+
+impl TetMesh {
+    /// Validates `positions` and `tets` and builds the adjacency. Tets given with negative
+    /// orientation are reoriented (two vertices swapped) so that every rest volume is positive;
+    /// [`TetMesh::reoriented_tets`] says how many were.
+    pub fn new(positions: Vec<Vec3>, mut tets: Vec<[u32; 4]>) -> Result<Self, TetMeshError> {
+        if positions.is_empty() {
+            return Err(TetMeshError::NoVertices);
+        }
+        if tets.is_empty() {
+            return Err(TetMeshError::NoTets);
+        }
+        if positions.len() > u32::MAX as usize {
+            return Err(TetMeshError::TooManyVertices(positions.len()));
+        }
+        if let Some((vertex, &position)) =
+            positions.iter().enumerate().find(|(_, p)| !p.is_finite())
+        {
+            return Err(TetMeshError::NonFiniteVertex { vertex, position });
+        }
+        let n = positions.len();
+        let mut rest_volumes = Vec::with_capacity(tets.len());
+        let mut reoriented_tets = 0;
+        let mut used = vec![false; n];
+        for (t, tet) in tets.iter_mut().enumerate() {
+            for (k, &i) in tet.iter().enumerate() {
+                if i as usize >= n {
+                    return Err(TetMeshError::IndexOutOfRange {
+                        tet: t,
+                        index: i,
+                        vertex_count: n,
+                    });
+                }
+                if tet[..k].contains(&i) {
+                    return Err(TetMeshError::RepeatedVertex { tet: t, vertex: i });
+                }
+                used[i as usize] = true;
+            }
+            let p = tet.map(|i| positions[i as usize]);
+            let mut volume = signed_volume(&p);
+            let longest_edge = (0..4)
+                .flat_map(|a| (a + 1..4).map(move |b| (a, b)))
+                .map(|(a, b)| p[a].distance(p[b]))
+                .fold(0.0f32, f32::max);
+            if !(volume.abs() > DEGENERATE_RATIO * longest_edge.powi(3)) {
+                return Err(TetMeshError::DegenerateTet {
+                    tet: t,
+                    volume,
+                    longest_edge,
+                });
+            }
+            if volume < 0.0 {
+                tet.swap(1, 2);
+                volume = -volume;
+                reoriented_tets += 1;
+            }
+            rest_volumes.push(volume);
+        }
+        if let Some(vertex) = used.iter().position(|&u| !u) {
+            return Err(TetMeshError::UnreferencedVertex { vertex });
+        }
+
+        // Edges: every vertex pair of every tet, once.
+        let mut edges: Vec<[u32; 2]> = tets
+            .iter()
+            .flat_map(|t| {
+                [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)].map(|(a, b)| {
+                    let (i, j) = (t[a], t[b]);
+                    [i.min(j), i.max(j)]
+                })
+            })
+            .collect();
+        edges.sort_unstable();
+        edges.dedup();
+
+        let pairs: Vec<(u32, u32)> = tets
+            .iter()
+            .enumerate()
+            .flat_map(|(t, tet)| tet.map(|i| (i, t as u32)))
+            .collect();
+        let one_rings = Csr::from_pairs(n, &pairs);
+
+        // Ring vertices (all vertices of the ring's tets, the centre first) and the tets that
+        // touch the ring from outside, which the neighbour clamp must also watch.
+        let mut stamp_v = vec![u32::MAX; n];
+        let mut stamp_t = vec![u32::MAX; tets.len()];
+        let mut ring_pairs = Vec::new();
+        let mut border_pairs = Vec::new();
+        for p in 0..n {
+            let key = p as u32;
+            let start = ring_pairs.len();
+            stamp_v[p] = key;
+            ring_pairs.push((key, key));
+            for &t in one_rings.row(p) {
+                stamp_t[t as usize] = key;
+                for &i in &tets[t as usize] {
+                    if stamp_v[i as usize] != key {
+                        stamp_v[i as usize] = key;
+                        ring_pairs.push((key, i));
+                    }
+                }
+            }
+            for k in start..ring_pairs.len() {
+                let i = ring_pairs[k].1;
+                for &t in one_rings.row(i as usize) {
+                    if stamp_t[t as usize] != key {
+                        stamp_t[t as usize] = key;
+                        border_pairs.push((key, t));
+                    }
+                }
+            }
+        }
+        let ring_vertices = Csr::from_pairs(n, &ring_pairs);
+        let ring_border_tets = Csr::from_pairs(n, &border_pairs);
+
+        // Tets sharing at least one vertex with each tet.
+        let mut stamp_t = vec![u32::MAX; tets.len()];
+        let mut neighbour_pairs = Vec::new();
+        for (t, tet) in tets.iter().enumerate() {
+            let key = t as u32;
+            stamp_t[t] = key;
+            for &i in tet {
+                for &u in one_rings.row(i as usize) {
+                    if stamp_t[u as usize] != key {
+                        stamp_t[u as usize] = key;
+                        neighbour_pairs.push((key, u));
+                    }
+                }
+            }
+        }
+        let tet_neighbours = Csr::from_pairs(tets.len(), &neighbour_pairs);
+
+        Ok(TetMesh {
+            positions,
+            tets,
+            rest_volumes,
+            edges,
+            one_rings,
+            ring_vertices,
+            ring_border_tets,
+            tet_neighbours,
+            reoriented_tets,
+        })
+    }
+
+    /// Rest positions of the vertices.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// The tets, each positively oriented at rest.
+    pub fn tets(&self) -> &[[u32; 4]] {
+        &self.tets
+    }
+
+    /// Rest volume `V0` of each tet (all positive).
+    pub fn rest_volumes(&self) -> &[f32] {
+        &self.rest_volumes
+    }
+
+    /// Sum of the rest volumes.
+    pub fn total_rest_volume(&self) -> f64 {
+        self.rest_volumes.iter().map(|&v| v as f64).sum()
+    }
+
+    /// Unique edges `[i, j]` with `i < j`: the springs.
+    pub fn edges(&self) -> &[[u32; 2]] {
+        &self.edges
+    }
+
+    /// The tets that contain vertex `p`: its one-ring `T_p`.
+    #[inline]
+    pub fn one_ring(&self, p: usize) -> &[u32] {
+        self.one_rings.row(p)
+    }
+
+    /// All vertices of the one-ring of `p` (the particles its ring impulse moves), `p` first.
+    #[inline]
+    pub fn ring_vertices(&self, p: usize) -> &[u32] {
+        self.ring_vertices.row(p)
+    }
+
+    /// Tets outside the one-ring of `p` that share a vertex with it: their volume changes when
+    /// the ring's particles move, so the neighbour clamp watches them.
+    #[inline]
+    pub fn ring_border_tets(&self, p: usize) -> &[u32] {
+        self.ring_border_tets.row(p)
+    }
+
+    /// Tets that share at least one vertex with tet `t` (not `t` itself).
+    #[inline]
+    pub fn tet_neighbours(&self, t: usize) -> &[u32] {
+        self.tet_neighbours.row(t)
+    }
+
+    /// Number of vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.positions.len()
+    }
+
+    /// Number of tets.
+    pub fn tet_count(&self) -> usize {
+        self.tets.len()
+    }
+
+    /// How many input tets had negative orientation and were reoriented.
+    pub fn reoriented_tets(&self) -> usize {
+        self.reoriented_tets
+    }
+
+    /// Axis-aligned bounds of the rest positions.
+    pub fn bounds(&self) -> (Vec3, Vec3) {
+        self.positions.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn unit_tet() -> (Vec<Vec3>, Vec<[u32; 4]>) {
+        (
+            vec![Vec3::X, Vec3::Y, Vec3::Z, Vec3::ZERO],
+            vec![[0, 1, 2, 3]],
+        )
+    }
+
+    #[test]
+    fn valid_tet_and_reorientation() {
+        let (p, t) = unit_tet();
+        let m = TetMesh::new(p.clone(), t).unwrap();
+        assert_eq!(m.reoriented_tets(), 0);
+        assert_eq!(m.edges().len(), 6);
+        let m = TetMesh::new(p, vec![[1, 0, 2, 3]]).unwrap();
+        assert_eq!(m.reoriented_tets(), 1);
+        assert!(m.rest_volumes()[0] > 0.0);
+        let tet = m.tets()[0].map(|i| m.positions()[i as usize]);
+        assert!(signed_volume(&tet) > 0.0);
+    }
+
+    #[test]
+    fn bad_meshes_give_errors() {
+        let (p, t) = unit_tet();
+        assert_eq!(
+            TetMesh::new(vec![], t.clone()).unwrap_err(),
+            TetMeshError::NoVertices
+        );
+        assert_eq!(
+            TetMesh::new(p.clone(), vec![]).unwrap_err(),
+            TetMeshError::NoTets
+        );
+        assert!(matches!(
+            TetMesh::new(p.clone(), vec![[0, 1, 2, 9]]),
+            Err(TetMeshError::IndexOutOfRange {
+                tet: 0,
+                index: 9,
+                vertex_count: 4
+            })
+        ));
+        assert!(matches!(
+            TetMesh::new(p.clone(), vec![[0, 1, 1, 3]]),
+            Err(TetMeshError::RepeatedVertex { tet: 0, vertex: 1 })
+        ));
+        let mut nan = p.clone();
+        nan[2].y = f32::NAN;
+        assert!(matches!(
+            TetMesh::new(nan, t.clone()),
+            Err(TetMeshError::NonFiniteVertex { vertex: 2, .. })
+        ));
+        let mut inf = p.clone();
+        inf[0].x = f32::INFINITY;
+        assert!(matches!(
+            TetMesh::new(inf, t.clone()),
+            Err(TetMeshError::NonFiniteVertex { vertex: 0, .. })
+        ));
+        let flat = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::new(1.0, 1.0, 0.0)];
+        assert!(matches!(
+            TetMesh::new(flat, t.clone()),
+            Err(TetMeshError::DegenerateTet { tet: 0, .. })
+        ));
+        let mut extra = p.clone();
+        extra.push(Vec3::ONE);
+        assert_eq!(
+            TetMesh::new(extra, t).unwrap_err(),
+            TetMeshError::UnreferencedVertex { vertex: 4 }
+        );
+        // Every error says what is wrong in words.
+        let e = TetMesh::new(p, vec![[0, 1, 2, 7]]).unwrap_err();
+        assert!(e.to_string().contains("vertex 7"));
+    }
+
+    #[test]
+    fn adjacency_of_two_tets() {
+        // Two tets sharing the face (0, 1, 2).
+        let p = vec![Vec3::ZERO, Vec3::X, Vec3::Y, Vec3::Z, -Vec3::Z];
+        let m = TetMesh::new(p, vec![[0, 1, 2, 3], [0, 2, 1, 4]]).unwrap();
+        assert_eq!(m.one_ring(0), &[0, 1]);
+        assert_eq!(m.one_ring(3), &[0]);
+        assert_eq!(m.ring_vertices(3).len(), 4);
+        assert_eq!(m.ring_vertices(3)[0], 3);
+        assert_eq!(m.ring_border_tets(3), &[1]);
+        assert!(m.ring_border_tets(0).is_empty());
+        assert_eq!(m.tet_neighbours(0), &[1]);
+        assert_eq!(m.edges().len(), 9);
+    }
+}
