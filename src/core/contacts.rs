@@ -13,14 +13,15 @@ use glam::Vec3;
 use parry3d::bounding_volume::Aabb;
 use parry3d::math::Pose;
 use parry3d::query::contact;
-use parry3d::shape::{Ball, Shape};
+use parry3d::shape::{Ball, SharedShape};
 
 use super::body::SoftBodyState;
 
 /// A static collider as the contact stage sees it.
-pub struct StaticColliderRef<'a> {
+#[derive(Clone)]
+pub struct ColliderInstance {
     /// Its shape.
-    pub shape: &'a dyn Shape,
+    pub shape: SharedShape,
     /// Its pose in the world.
     pub pose: Pose,
     /// Its world bounds (from [`StaticColliderRef::new`]), to skip far particles cheaply.
@@ -29,10 +30,10 @@ pub struct StaticColliderRef<'a> {
     pub friction: f32,
 }
 
-impl<'a> StaticColliderRef<'a> {
+impl ColliderInstance {
     /// A collider of `shape` at `pose`.
-    pub fn new(shape: &'a dyn Shape, pose: Pose, friction: f32) -> Self {
-        StaticColliderRef {
+    pub fn new(shape: SharedShape, pose: Pose, friction: f32) -> Self {
+        ColliderInstance {
             aabb: shape.compute_aabb(&pose),
             shape,
             pose,
@@ -74,7 +75,7 @@ fn friction_change(vt: Vec3, limit: f32) -> Vec3 {
 
 impl SoftBodyState {
     /// Pushes previewed positions out of static colliders. Returns the number of contacts.
-    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[StaticColliderRef]) -> u32 {
+    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
         let mut contacts = 0;
         let friction = self.material.friction;
         for i in 0..self.positions.len() {
@@ -160,7 +161,7 @@ impl RigidSphereState {
     }
 
     /// Pushes the previewed sphere out of static colliders. Returns the number of contacts.
-    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[StaticColliderRef]) -> u32 {
+    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
         if self.inv_mass == 0.0 {
             return 0;
         }
@@ -170,7 +171,7 @@ impl RigidSphereState {
             let pose = Pose::from_translation(self.position + h * self.velocity);
             // Unsupported shape pairs cannot occur for a ball against parry's shapes; if one
             // does, the sphere passes through that collider rather than stopping the game.
-            let Ok(Some(hit)) = contact(&c.pose, c.shape, &pose, &ball, 0.0) else {
+            let Ok(Some(hit)) = contact(&c.pose, &*c.shape, &pose, &ball, 0.0) else {
                 continue;
             };
             if hit.dist >= 0.0 {

@@ -11,7 +11,7 @@ pub mod roots;
 pub mod tet_mesh;
 
 pub use body::{ParticleIndexError, SoftBodyState, StepCounters, VolumeMetrics};
-pub use contacts::{RigidSphereState, StaticColliderRef};
+pub use contacts::{ColliderInstance, RigidSphereState};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::ImpulseOutcome;
 pub use material::{ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod};

@@ -1,0 +1,169 @@
+//! The components and resources a game spawns and reads.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use bevy::prelude::*;
+use parry3d::shape::SharedShape;
+
+use crate::core::{MaterialError, SoftBodyMaterial, SoftBodyState, StepCounters, TetMesh};
+
+/// A soft body. Spawn it with a [`Transform`] that places its tet mesh in the world (the mesh
+/// is given in its own local frame); on its first step the plugin moves the particles there.
+///
+/// The particles are simulated in world space. After placement the entity's [`Transform`]
+/// follows the body: its translation is the centre of mass, its rotation and scale identity,
+/// so a camera or child entity can follow it. A scale in the spawn transform is baked into the
+/// rest shape (the tet mesh is rebuilt at that scale).
+#[derive(Component)]
+#[require(Transform, SoftBodyStats)]
+pub struct SoftBody {
+    pub(crate) state: SoftBodyState,
+    pub(crate) placed: bool,
+    pub(crate) step_time: Duration,
+}
+
+impl SoftBody {
+    /// A soft body of `mesh`, made of `material`.
+    pub fn new(mesh: Arc<TetMesh>, material: SoftBodyMaterial) -> Result<Self, MaterialError> {
+        Ok(SoftBody { state: SoftBodyState::new(mesh, material)?, placed: false, step_time: Duration::ZERO })
+    }
+
+    /// The simulation state: particles, springs, material.
+    pub fn state(&self) -> &SoftBodyState {
+        &self.state
+    }
+
+    /// The simulation state, to change velocities or the material at run time.
+    pub fn state_mut(&mut self) -> &mut SoftBodyState {
+        &mut self.state
+    }
+
+    /// Whether the body has been placed at its spawn transform yet.
+    pub fn is_placed(&self) -> bool {
+        self.placed
+    }
+}
+
+/// Particles of the [`SoftBody`] on the same entity that do not move (the held end of the
+/// twisted bar, a creature's anchor). Remove the component to let them go.
+#[derive(Component, Clone, Debug, Default, Reflect)]
+#[reflect(Component)]
+pub struct PinnedParticles(pub Vec<u32>);
+
+/// Particles of the [`SoftBody`] on the same entity that follow the [`Transform`] of
+/// `target`, keeping the offset they had from it when first seen (the turned end of the
+/// twisted bar, a grabbed handle). Remove the component to release them.
+#[derive(Component, Clone, Debug, Reflect)]
+#[reflect(Component)]
+pub struct DrivenParticles {
+    /// The entity whose transform the particles follow. Its `Transform` is read as a world
+    /// transform: use a top-level entity.
+    pub target: Entity,
+    /// The particle indices.
+    pub particles: Vec<u32>,
+    /// Offsets in the target's frame, captured on the first step.
+    #[reflect(ignore)]
+    pub(crate) offsets: Vec<Vec3>,
+}
+
+impl DrivenParticles {
+    /// `particles` follow `target`.
+    pub fn new(target: Entity, particles: Vec<u32>) -> Self {
+        DrivenParticles { target, particles, offsets: Vec::new() }
+    }
+}
+
+/// A dynamic rigid sphere, simulated by the plugin and two-way coupled to soft bodies by
+/// contact impulses: a heavy sphere dents a body and is slowed by it. Its position is its
+/// entity's [`Transform`] translation. It does not rotate, and spheres do not collide with
+/// each other.
+#[derive(Component, Clone, Debug, Reflect)]
+#[reflect(Component)]
+#[require(Transform)]
+pub struct RigidSphere {
+    /// Radius.
+    pub radius: f32,
+    /// Mass; `f32::INFINITY` makes an immovable (kinematic) sphere.
+    pub mass: f32,
+    /// Linear velocity.
+    pub velocity: Vec3,
+    /// Coulomb friction coefficient.
+    pub friction: f32,
+}
+
+impl RigidSphere {
+    /// A sphere at rest with friction 0.5.
+    pub fn new(radius: f32, mass: f32) -> Self {
+        RigidSphere { radius, mass, velocity: Vec3::ZERO, friction: 0.5 }
+    }
+}
+
+/// A static collider of any parry shape, posed by its entity's [`Transform`] (translation and
+/// rotation; parry shapes carry their own size, so scale is ignored).
+#[derive(Component, Clone)]
+#[require(Transform)]
+pub struct StaticCollider {
+    /// The shape.
+    pub shape: SharedShape,
+    /// Coulomb friction coefficient.
+    pub friction: f32,
+}
+
+impl StaticCollider {
+    /// An infinite ground plane through the entity's translation, facing its local +Y.
+    pub fn ground(friction: f32) -> Self {
+        StaticCollider { shape: SharedShape::halfspace(Vec3::Y), friction }
+    }
+
+    /// Any parry shape.
+    pub fn new(shape: SharedShape, friction: f32) -> Self {
+        StaticCollider { shape, friction }
+    }
+}
+
+/// Gravity for every soft body and rigid sphere.
+#[derive(Resource, Clone, Copy, Debug, Reflect)]
+#[reflect(Resource)]
+pub struct SoftBodyGravity(pub Vec3);
+
+impl Default for SoftBodyGravity {
+    fn default() -> Self {
+        SoftBodyGravity(Vec3::new(0.0, -9.81, 0.0))
+    }
+}
+
+/// Per-body measurements, updated after every step.
+#[derive(Component, Clone, Debug, Default, Reflect)]
+#[reflect(Component)]
+pub struct SoftBodyStats {
+    /// Steps simulated.
+    pub steps: u64,
+    /// Signed total volume error in percent of the rest volume (the paper's Figure 2).
+    pub volume_error_pct: f64,
+    /// Largest absolute total volume error seen so far, in percent.
+    pub peak_volume_error_pct: f64,
+    /// Mean over tets of the absolute per-tet volume error, in percent.
+    pub mean_abs_tet_error_pct: f64,
+    /// Tets with negative volume now.
+    pub inverted_tets: usize,
+    /// Most inverted tets seen in one step so far.
+    pub max_inverted_tets: usize,
+    /// Solver time of the last step for this body, in milliseconds (every stage, contacts
+    /// included).
+    pub step_ms: f64,
+    /// Sum of [`SoftBodyStats::step_ms`] over all steps.
+    pub total_step_ms: f64,
+    /// Particle contacts resolved in the last step (both contact passes).
+    pub contacts: u32,
+    /// What the volume passes did in the last step.
+    #[reflect(ignore)]
+    pub counters: StepCounters,
+}
+
+impl SoftBodyStats {
+    /// Mean solver time per step so far, in milliseconds.
+    pub fn mean_step_ms(&self) -> f64 {
+        if self.steps == 0 { 0.0 } else { self.total_step_ms / self.steps as f64 }
+    }
+}

@@ -1,0 +1,351 @@
+//! [`SoftBodyPlugin`]: the systems that step every soft body, in ordered sets that mirror the
+//! stages of a step, so that a game can put its own systems between them.
+
+use std::time::Duration;
+
+use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
+use bevy::platform::time::Instant;
+use bevy::prelude::*;
+use parry3d::math::Pose;
+
+use crate::components::{
+    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, SoftBodyStats, StaticCollider,
+};
+use crate::core::{ColliderInstance, RigidSphereState, SoftBodyState, TetMesh};
+
+/// The stages of a step, run in this order in the plugin's schedule (see `core::body` for what
+/// each does and why in this order).
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SoftBodySet {
+    /// Place new bodies, clear last step's counters, apply pinned and driven particles.
+    Prepare,
+    /// Gravity, springs with damping, baseline volume forces; the velocities of spheres.
+    Forces,
+    /// Contacts on the previewed positions, so the volume passes see them.
+    Contacts,
+    /// The one-ring volume impulses.
+    OneRing,
+    /// The per-tet correction scaled by gamma.
+    PerTet,
+    /// Plastic springs.
+    Plasticity,
+    /// A last contact pass, then `x += h v` for particles and spheres.
+    Integrate,
+    /// Metrics into [`SoftBodyStats`], transforms follow the bodies.
+    Writeback,
+}
+
+/// Adds soft-body simulation to an app.
+///
+/// By default the simulation runs in [`FixedUpdate`] and sets the fixed time step to the
+/// paper's 10 ms; each run of the schedule is one step of `Time::delta` (the fixed step there).
+/// Gravity is the [`SoftBodyGravity`] resource.
+pub struct SoftBodyPlugin {
+    /// The schedule the stages run in.
+    pub schedule: InternedScheduleLabel,
+    /// If set and the schedule is [`FixedUpdate`], the fixed time step to use. `None` leaves
+    /// `Time<Fixed>` as the game configured it.
+    pub time_step: Option<Duration>,
+}
+
+impl Default for SoftBodyPlugin {
+    fn default() -> Self {
+        SoftBodyPlugin { schedule: FixedUpdate.intern(), time_step: Some(Duration::from_millis(10)) }
+    }
+}
+
+impl SoftBodyPlugin {
+    /// Runs the stages in `schedule` instead of [`FixedUpdate`].
+    pub fn new(schedule: impl ScheduleLabel) -> Self {
+        SoftBodyPlugin { schedule: schedule.intern(), time_step: None }
+    }
+}
+
+impl Plugin for SoftBodyPlugin {
+    fn build(&self, app: &mut App) {
+        app.init_resource::<SoftBodyGravity>()
+            .register_type::<SoftBodyGravity>()
+            .register_type::<SoftBodyStats>()
+            .register_type::<PinnedParticles>()
+            .register_type::<DrivenParticles>()
+            .register_type::<RigidSphere>();
+        if let Some(step) = self.time_step
+            && self.schedule == FixedUpdate.intern()
+        {
+            app.insert_resource(Time::<Fixed>::from_duration(step));
+        }
+        app.configure_sets(
+            self.schedule,
+            (
+                SoftBodySet::Prepare,
+                SoftBodySet::Forces,
+                SoftBodySet::Contacts,
+                SoftBodySet::OneRing,
+                SoftBodySet::PerTet,
+                SoftBodySet::Plasticity,
+                SoftBodySet::Integrate,
+                SoftBodySet::Writeback,
+            )
+                .chain(),
+        );
+        app.add_systems(
+            self.schedule,
+            (
+                prepare.in_set(SoftBodySet::Prepare),
+                apply_forces.in_set(SoftBodySet::Forces),
+                resolve_contacts.in_set(SoftBodySet::Contacts),
+                one_ring.in_set(SoftBodySet::OneRing),
+                per_tet.in_set(SoftBodySet::PerTet),
+                plasticity.in_set(SoftBodySet::Plasticity),
+                integrate.in_set(SoftBodySet::Integrate),
+                writeback.in_set(SoftBodySet::Writeback),
+            ),
+        );
+    }
+}
+
+/// Runs `f` on the body's state and adds the time it took to the body's step time.
+fn timed(body: &mut SoftBody, f: impl FnOnce(&mut SoftBodyState)) {
+    let start = Instant::now();
+    f(&mut body.state);
+    body.step_time += start.elapsed();
+}
+
+/// The body's rest mesh scaled by `scale`, or the error that makes that impossible.
+fn scaled_mesh(mesh: &TetMesh, scale: Vec3) -> Result<TetMesh, crate::core::TetMeshError> {
+    TetMesh::new(mesh.positions().iter().map(|&p| p * scale).collect(), mesh.tets().to_vec())
+}
+
+fn prepare(
+    mut bodies: Query<(
+        Entity,
+        &mut SoftBody,
+        &mut Transform,
+        Option<&PinnedParticles>,
+        Option<&mut DrivenParticles>,
+    )>,
+    targets: Query<&Transform, Without<SoftBody>>,
+) {
+    for (entity, mut body, mut transform, pinned, driven) in &mut bodies {
+        let body = &mut *body;
+        if !body.placed {
+            let placement = *transform;
+            if placement.scale != Vec3::ONE {
+                match scaled_mesh(body.state.mesh(), placement.scale)
+                    .map_err(|e| e.to_string())
+                    .and_then(|m| SoftBodyState::new(m.into(), *body.state.material()).map_err(|e| e.to_string()))
+                {
+                    Ok(state) => body.state = state,
+                    Err(e) => error!("soft body {entity}: cannot apply the scale {}: {e}; the body keeps its size", placement.scale),
+                }
+            }
+            body.state
+                .map_positions(|p| placement.rotation * p + placement.translation);
+            body.placed = true;
+            *transform = Transform::from_translation(body.state.centre_of_mass());
+        }
+        body.step_time = Duration::ZERO;
+        body.state.begin_step();
+        body.state.clear_kinematic();
+        if let Some(pinned) = pinned {
+            for &i in &pinned.0 {
+                let target = body.state.positions().get(i as usize).copied().unwrap_or_default();
+                if let Err(e) = body.state.set_kinematic(i as usize, target) {
+                    error!("soft body {entity}: pinned {e}");
+                }
+            }
+        }
+        if let Some(mut driven) = driven {
+            let Ok(target) = targets.get(driven.target) else {
+                error!("soft body {entity}: driven particles follow {}, which has no Transform", driven.target);
+                continue;
+            };
+            let to_world = target.to_matrix();
+            if driven.offsets.len() != driven.particles.len() {
+                let to_local = to_world.inverse();
+                let offsets = driven
+                    .particles
+                    .iter()
+                    .map(|&i| {
+                        let p = body.state.positions().get(i as usize).copied().unwrap_or_default();
+                        to_local.transform_point3(p)
+                    })
+                    .collect();
+                driven.offsets = offsets;
+            }
+            for (&i, &offset) in driven.particles.iter().zip(&driven.offsets) {
+                if let Err(e) = body.state.set_kinematic(i as usize, to_world.transform_point3(offset)) {
+                    error!("soft body {entity}: driven {e}");
+                }
+            }
+        }
+    }
+}
+
+fn apply_forces(
+    time: Res<Time>,
+    gravity: Res<SoftBodyGravity>,
+    mut bodies: Query<&mut SoftBody>,
+    mut spheres: Query<&mut RigidSphere>,
+) {
+    let h = time.delta_secs();
+    if h <= 0.0 {
+        return;
+    }
+    for mut body in &mut bodies {
+        timed(&mut body, |s| s.apply_forces(h, gravity.0));
+    }
+    for mut sphere in &mut spheres {
+        if sphere.mass.is_finite() {
+            sphere.velocity += h * gravity.0;
+        }
+    }
+}
+
+/// Reused buffers for the contact passes, so that a step does not allocate.
+#[derive(Default)]
+struct ContactBuffers {
+    colliders: Vec<ColliderInstance>,
+    spheres: Vec<(Entity, RigidSphereState)>,
+    states: Vec<RigidSphereState>,
+}
+
+fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState {
+    let inv_mass = if sphere.mass.is_finite() && sphere.mass > 0.0 { 1.0 / sphere.mass } else { 0.0 };
+    RigidSphereState {
+        position: transform.translation,
+        velocity: sphere.velocity,
+        radius: sphere.radius,
+        inv_mass,
+        friction: sphere.friction,
+    }
+}
+
+/// One contact pass over everything: spheres against static colliders, then particles against
+/// spheres, then particles against static colliders (last, so that no particle is left inside
+/// the ground by a sphere pushing it).
+fn contact_pass(
+    h: f32,
+    buffers: &mut ContactBuffers,
+    bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    spheres: &mut Query<(Entity, &mut RigidSphere, &Transform)>,
+    colliders: &Query<(&StaticCollider, &Transform)>,
+) {
+    buffers.colliders.clear();
+    for (collider, transform) in colliders {
+        let pose = Pose::from_parts(transform.translation, transform.rotation);
+        buffers.colliders.push(ColliderInstance::new(collider.shape.clone(), pose, collider.friction));
+    }
+    buffers.states.clear();
+    buffers.spheres.clear();
+    for (entity, sphere, transform) in spheres.iter() {
+        let mut state = sphere_state(sphere, transform);
+        state.resolve_static_contacts(h, &buffers.colliders);
+        buffers.spheres.push((entity, state));
+        buffers.states.push(state);
+    }
+    for (mut body, mut stats) in bodies.iter_mut() {
+        let mut contacts = 0;
+        let (states, colliders) = (&mut buffers.states, &buffers.colliders);
+        timed(&mut body, |s| {
+            contacts += s.resolve_sphere_contacts(h, states);
+            contacts += s.resolve_static_contacts(h, colliders);
+        });
+        stats.contacts += contacts;
+    }
+    for ((entity, _), state) in buffers.spheres.iter().zip(&buffers.states) {
+        if let Ok((_, mut sphere, _)) = spheres.get_mut(*entity) {
+            sphere.velocity = state.velocity;
+        }
+    }
+}
+
+fn resolve_contacts(
+    time: Res<Time>,
+    mut buffers: Local<ContactBuffers>,
+    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    mut spheres: Query<(Entity, &mut RigidSphere, &Transform)>,
+    colliders: Query<(&StaticCollider, &Transform)>,
+) {
+    let h = time.delta_secs();
+    if h <= 0.0 {
+        return;
+    }
+    for (_, mut stats) in &mut bodies {
+        stats.contacts = 0;
+    }
+    contact_pass(h, &mut buffers, &mut bodies, &mut spheres, &colliders);
+}
+
+fn one_ring(time: Res<Time>, mut bodies: Query<&mut SoftBody>) {
+    let h = time.delta_secs();
+    if h <= 0.0 {
+        return;
+    }
+    for mut body in &mut bodies {
+        timed(&mut body, |s| s.one_ring_pass(h));
+    }
+}
+
+fn per_tet(time: Res<Time>, mut bodies: Query<&mut SoftBody>) {
+    let h = time.delta_secs();
+    if h <= 0.0 {
+        return;
+    }
+    for mut body in &mut bodies {
+        timed(&mut body, |s| s.per_tet_pass(h));
+    }
+}
+
+fn plasticity(time: Res<Time>, mut bodies: Query<&mut SoftBody>) {
+    let h = time.delta_secs();
+    if h <= 0.0 {
+        return;
+    }
+    for mut body in &mut bodies {
+        timed(&mut body, |s| s.apply_plasticity(h));
+    }
+}
+
+fn integrate(
+    time: Res<Time>,
+    mut buffers: Local<ContactBuffers>,
+    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    mut spheres: Query<(Entity, &mut RigidSphere, &Transform)>,
+    colliders: Query<(&StaticCollider, &Transform)>,
+    mut sphere_transforms: Query<&mut Transform, (With<RigidSphere>, Without<SoftBody>)>,
+) {
+    let h = time.delta_secs();
+    if h <= 0.0 {
+        return;
+    }
+    contact_pass(h, &mut buffers, &mut bodies, &mut spheres, &colliders);
+    for (mut body, mut stats) in &mut bodies {
+        timed(&mut body, |s| s.integrate_positions(h));
+        stats.steps += 1;
+    }
+    for (entity, sphere, _) in spheres.iter() {
+        let velocity = sphere.velocity;
+        if let Ok(mut transform) = sphere_transforms.get_mut(entity) {
+            transform.translation += h * velocity;
+        }
+    }
+}
+
+fn writeback(mut bodies: Query<(&SoftBody, &mut SoftBodyStats, &mut Transform)>) {
+    for (body, mut stats, mut transform) in &mut bodies {
+        if !body.placed {
+            continue;
+        }
+        let m = body.state.volume_metrics();
+        stats.volume_error_pct = m.volume_error_pct;
+        stats.peak_volume_error_pct = stats.peak_volume_error_pct.max(m.volume_error_pct.abs());
+        stats.mean_abs_tet_error_pct = m.mean_abs_tet_error_pct;
+        stats.inverted_tets = m.inverted_tets;
+        stats.max_inverted_tets = stats.max_inverted_tets.max(m.inverted_tets);
+        stats.step_ms = body.step_time.as_secs_f64() * 1e3;
+        stats.total_step_ms += stats.step_ms;
+        stats.counters = body.state.counters();
+        transform.translation = body.state.centre_of_mass();
+    }
+}
