@@ -26,7 +26,11 @@ pub struct SoftBody {
 impl SoftBody {
     /// A soft body of `mesh`, made of `material`.
     pub fn new(mesh: Arc<TetMesh>, material: SoftBodyMaterial) -> Result<Self, MaterialError> {
-        Ok(SoftBody { state: SoftBodyState::new(mesh, material)?, placed: false, step_time: Duration::ZERO })
+        Ok(SoftBody {
+            state: SoftBodyState::new(mesh, material)?,
+            placed: false,
+            step_time: Duration::ZERO,
+        })
     }
 
     /// The simulation state: particles, springs, material.
@@ -70,7 +74,11 @@ pub struct DrivenParticles {
 impl DrivenParticles {
     /// `particles` follow `target`.
     pub fn new(target: Entity, particles: Vec<u32>) -> Self {
-        DrivenParticles { target, particles, offsets: Vec::new() }
+        DrivenParticles {
+            target,
+            particles,
+            offsets: Vec::new(),
+        }
     }
 }
 
@@ -95,7 +103,12 @@ pub struct RigidSphere {
 impl RigidSphere {
     /// A sphere at rest with friction 0.5.
     pub fn new(radius: f32, mass: f32) -> Self {
-        RigidSphere { radius, mass, velocity: Vec3::ZERO, friction: 0.5 }
+        RigidSphere {
+            radius,
+            mass,
+            velocity: Vec3::ZERO,
+            friction: 0.5,
+        }
     }
 }
 
@@ -113,7 +126,10 @@ pub struct StaticCollider {
 impl StaticCollider {
     /// An infinite ground plane through the entity's translation, facing its local +Y.
     pub fn ground(friction: f32) -> Self {
-        StaticCollider { shape: SharedShape::halfspace(Vec3::Y), friction }
+        StaticCollider {
+            shape: SharedShape::halfspace(Vec3::Y),
+            friction,
+        }
     }
 
     /// Any parry shape.
@@ -164,6 +180,10 @@ pub struct SoftBodyStats {
 impl SoftBodyStats {
     /// Mean solver time per step so far, in milliseconds.
     pub fn mean_step_ms(&self) -> f64 {
-        if self.steps == 0 { 0.0 } else { self.total_step_ms / self.steps as f64 }
+        if self.steps == 0 {
+            0.0
+        } else {
+            self.total_step_ms / self.steps as f64
+        }
     }
 }

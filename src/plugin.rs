@@ -9,7 +9,8 @@ use bevy::prelude::*;
 use parry3d::math::Pose;
 
 use crate::components::{
-    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, SoftBodyStats, StaticCollider,
+    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, SoftBodyStats,
+    StaticCollider,
 };
 use crate::core::{ColliderInstance, RigidSphereState, SoftBodyState, TetMesh};
 
@@ -50,14 +51,20 @@ pub struct SoftBodyPlugin {
 
 impl Default for SoftBodyPlugin {
     fn default() -> Self {
-        SoftBodyPlugin { schedule: FixedUpdate.intern(), time_step: Some(Duration::from_millis(10)) }
+        SoftBodyPlugin {
+            schedule: FixedUpdate.intern(),
+            time_step: Some(Duration::from_millis(10)),
+        }
     }
 }
 
 impl SoftBodyPlugin {
     /// Runs the stages in `schedule` instead of [`FixedUpdate`].
     pub fn new(schedule: impl ScheduleLabel) -> Self {
-        SoftBodyPlugin { schedule: schedule.intern(), time_step: None }
+        SoftBodyPlugin {
+            schedule: schedule.intern(),
+            time_step: None,
+        }
     }
 }
 
@@ -113,7 +120,10 @@ fn timed(body: &mut SoftBody, f: impl FnOnce(&mut SoftBodyState)) {
 
 /// The body's rest mesh scaled by `scale`, or the error that makes that impossible.
 fn scaled_mesh(mesh: &TetMesh, scale: Vec3) -> Result<TetMesh, crate::core::TetMeshError> {
-    TetMesh::new(mesh.positions().iter().map(|&p| p * scale).collect(), mesh.tets().to_vec())
+    TetMesh::new(
+        mesh.positions().iter().map(|&p| p * scale).collect(),
+        mesh.tets().to_vec(),
+    )
 }
 
 fn prepare(
@@ -133,10 +143,15 @@ fn prepare(
             if placement.scale != Vec3::ONE {
                 match scaled_mesh(body.state.mesh(), placement.scale)
                     .map_err(|e| e.to_string())
-                    .and_then(|m| SoftBodyState::new(m.into(), *body.state.material()).map_err(|e| e.to_string()))
-                {
+                    .and_then(|m| {
+                        SoftBodyState::new(m.into(), *body.state.material())
+                            .map_err(|e| e.to_string())
+                    }) {
                     Ok(state) => body.state = state,
-                    Err(e) => error!("soft body {entity}: cannot apply the scale {}: {e}; the body keeps its size", placement.scale),
+                    Err(e) => error!(
+                        "soft body {entity}: cannot apply the scale {}: {e}; the body keeps its size",
+                        placement.scale
+                    ),
                 }
             }
             body.state
@@ -149,7 +164,12 @@ fn prepare(
         body.state.clear_kinematic();
         if let Some(pinned) = pinned {
             for &i in &pinned.0 {
-                let target = body.state.positions().get(i as usize).copied().unwrap_or_default();
+                let target = body
+                    .state
+                    .positions()
+                    .get(i as usize)
+                    .copied()
+                    .unwrap_or_default();
                 if let Err(e) = body.state.set_kinematic(i as usize, target) {
                     error!("soft body {entity}: pinned {e}");
                 }
@@ -157,7 +177,10 @@ fn prepare(
         }
         if let Some(mut driven) = driven {
             let Ok(target) = targets.get(driven.target) else {
-                error!("soft body {entity}: driven particles follow {}, which has no Transform", driven.target);
+                error!(
+                    "soft body {entity}: driven particles follow {}, which has no Transform",
+                    driven.target
+                );
                 continue;
             };
             let to_world = target.to_matrix();
@@ -167,14 +190,22 @@ fn prepare(
                     .particles
                     .iter()
                     .map(|&i| {
-                        let p = body.state.positions().get(i as usize).copied().unwrap_or_default();
+                        let p = body
+                            .state
+                            .positions()
+                            .get(i as usize)
+                            .copied()
+                            .unwrap_or_default();
                         to_local.transform_point3(p)
                     })
                     .collect();
                 driven.offsets = offsets;
             }
             for (&i, &offset) in driven.particles.iter().zip(&driven.offsets) {
-                if let Err(e) = body.state.set_kinematic(i as usize, to_world.transform_point3(offset)) {
+                if let Err(e) = body
+                    .state
+                    .set_kinematic(i as usize, to_world.transform_point3(offset))
+                {
                     error!("soft body {entity}: driven {e}");
                 }
             }
@@ -211,7 +242,11 @@ struct ContactBuffers {
 }
 
 fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState {
-    let inv_mass = if sphere.mass.is_finite() && sphere.mass > 0.0 { 1.0 / sphere.mass } else { 0.0 };
+    let inv_mass = if sphere.mass.is_finite() && sphere.mass > 0.0 {
+        1.0 / sphere.mass
+    } else {
+        0.0
+    };
     RigidSphereState {
         position: transform.translation,
         velocity: sphere.velocity,
@@ -228,18 +263,22 @@ fn contact_pass(
     h: f32,
     buffers: &mut ContactBuffers,
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    spheres: &mut Query<(Entity, &mut RigidSphere, &Transform)>,
-    colliders: &Query<(&StaticCollider, &Transform)>,
+    spheres: &mut Query<(Entity, &mut RigidSphere, &mut Transform)>,
+    colliders: &Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
     buffers.colliders.clear();
     for (collider, transform) in colliders {
         let pose = Pose::from_parts(transform.translation, transform.rotation);
-        buffers.colliders.push(ColliderInstance::new(collider.shape.clone(), pose, collider.friction));
+        buffers.colliders.push(ColliderInstance::new(
+            collider.shape.clone(),
+            pose,
+            collider.friction,
+        ));
     }
     buffers.states.clear();
     buffers.spheres.clear();
     for (entity, sphere, transform) in spheres.iter() {
-        let mut state = sphere_state(sphere, transform);
+        let mut state = sphere_state(sphere, &transform);
         state.resolve_static_contacts(h, &buffers.colliders);
         buffers.spheres.push((entity, state));
         buffers.states.push(state);
@@ -264,8 +303,8 @@ fn resolve_contacts(
     time: Res<Time>,
     mut buffers: Local<ContactBuffers>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    mut spheres: Query<(Entity, &mut RigidSphere, &Transform)>,
-    colliders: Query<(&StaticCollider, &Transform)>,
+    mut spheres: Query<(Entity, &mut RigidSphere, &mut Transform)>,
+    colliders: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -311,9 +350,8 @@ fn integrate(
     time: Res<Time>,
     mut buffers: Local<ContactBuffers>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    mut spheres: Query<(Entity, &mut RigidSphere, &Transform)>,
-    colliders: Query<(&StaticCollider, &Transform)>,
-    mut sphere_transforms: Query<&mut Transform, (With<RigidSphere>, Without<SoftBody>)>,
+    mut spheres: Query<(Entity, &mut RigidSphere, &mut Transform)>,
+    colliders: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -324,11 +362,8 @@ fn integrate(
         timed(&mut body, |s| s.integrate_positions(h));
         stats.steps += 1;
     }
-    for (entity, sphere, _) in spheres.iter() {
-        let velocity = sphere.velocity;
-        if let Ok(mut transform) = sphere_transforms.get_mut(entity) {
-            transform.translation += h * velocity;
-        }
+    for (_, sphere, mut transform) in &mut spheres {
+        transform.translation += h * sphere.velocity;
     }
 }
 

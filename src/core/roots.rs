@@ -62,7 +62,11 @@ pub fn first_crossing(c: &Cubic, hi: f64) -> Option<f64> {
 /// has its other positive roots only past a turning point, where the step has stopped being a
 /// correction and is an artefact of the cubic; `None` then.
 pub fn monotone_root(c: &Cubic) -> Option<f64> {
-    if !c.iter().all(|x| x.is_finite()) || c[0] == 0.0 || c[1] == 0.0 || (c[0] > 0.0) == (c[1] > 0.0) {
+    if !c.iter().all(|x| x.is_finite())
+        || c[0] == 0.0
+        || c[1] == 0.0
+        || (c[0] > 0.0) == (c[1] > 0.0)
+    {
         return None;
     }
     let scale = c.iter().fold(0.0f64, |m, x| m.max(x.abs()));
@@ -71,7 +75,11 @@ pub fn monotone_root(c: &Cubic) -> Option<f64> {
     let lead = c[degree].abs();
     let bound = 1.0 + (0..degree).map(|i| c[i].abs() / lead).fold(0.0, f64::max);
     let (r1, r2) = derivative_roots(&c, degree);
-    let turn = [r1, r2].into_iter().flatten().filter(|&r| r > 0.0).fold(bound, f64::min);
+    let turn = [r1, r2]
+        .into_iter()
+        .flatten()
+        .filter(|&r| r > 0.0)
+        .fold(bound, f64::min);
     let (p0, pt) = (c[0], eval(&c, turn));
     if pt == 0.0 {
         return Some(turn);
@@ -407,7 +415,12 @@ mod tests {
         let mut rng = Lcg(5);
         let mut answered = 0;
         for _ in 0..4000 {
-            let c: Cubic = [rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0), rng.range(-1.0, 1.0)];
+            let c: Cubic = [
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+                rng.range(-1.0, 1.0),
+            ];
             if let Some(r) = monotone_root(&c) {
                 let s = smallest_positive_root(&c, f64::INFINITY).unwrap();
                 assert!((r - s).abs() < 1e-9 * (1.0 + s), "{c:?}: {r} vs {s}");

@@ -1,0 +1,309 @@
+//! Runs the paper's five scenes with the baseline and the paper's method through the plugin in
+//! a headless app, and writes the paper's Figure 2 and the numbers behind it.
+//!
+//! ```text
+//! cargo run --release --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--verbose]
+//! ```
+//! writes `DIR/summary.csv`, `DIR/<scene>.csv` (time series) and `DIR/volume_error.png`, and
+//! prints the summary table.
+
+use std::fmt::Write as _;
+use std::path::PathBuf;
+
+use bevy::prelude::Transform;
+use bevy_soft_body::core::VolumeMethod;
+use bevy_soft_body::prelude::*;
+use bevy_soft_body::scenes::{PaperScene, headless_scene_app};
+use plotters::prelude::*;
+
+struct Args {
+    out: PathBuf,
+    scenes: Vec<PaperScene>,
+    verbose: bool,
+    impulses: ImpulseSettings,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut out = None;
+    let mut scenes = Vec::new();
+    let mut verbose = false;
+    let mut impulses = ImpulseSettings::PAPER;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--out" => out = Some(PathBuf::from(args.next().ok_or("--out needs a directory")?)),
+            "--scene" => {
+                let name = args.next().ok_or("--scene needs a name")?;
+                scenes.push(PaperScene::from_name(&name).ok_or_else(|| {
+                    let names: Vec<_> = PaperScene::ALL.iter().map(|s| s.name()).collect();
+                    format!("unknown scene `{name}`; scenes: {}", names.join(", "))
+                })?);
+            }
+            "--verbose" => verbose = true,
+            "--without" => {
+                // Switch parts of the paper's method off, to see what each one does.
+                for part in args
+                    .next()
+                    .ok_or("--without needs one-ring, per-tet or clamp")?
+                    .split(',')
+                {
+                    match part {
+                        "one-ring" => impulses.one_ring = false,
+                        "per-tet" => impulses.per_tet = false,
+                        "clamp" => impulses.neighbour_clamp = false,
+                        other => {
+                            return Err(format!(
+                                "unknown part `{other}`: one-ring, per-tet or clamp"
+                            ));
+                        }
+                    }
+                }
+            }
+            "-h" | "--help" => {
+                return Err("usage: paper_figures --out DIR [--scene NAME]... [--without one-ring,per-tet,clamp] [--verbose]".into());
+            }
+            other => return Err(format!("unknown argument `{other}` (try --help)")),
+        }
+    }
+    if scenes.is_empty() {
+        scenes = PaperScene::ALL.to_vec();
+    }
+    Ok(Args {
+        out: out.ok_or("--out DIR is required")?,
+        scenes,
+        verbose,
+        impulses,
+    })
+}
+
+/// One run's time series and summary.
+struct Run {
+    method: &'static str,
+    tets: usize,
+    steps: u64,
+    times: Vec<f64>,
+    error: Vec<f64>,
+    mean_abs: Vec<f64>,
+    inverted: Vec<usize>,
+    peak: f64,
+    max_inverted: usize,
+    mean_step_ms: f64,
+}
+
+fn run(scene: PaperScene, method: VolumeMethod, verbose: bool) -> Run {
+    let (mut app, body) = headless_scene_app(scene, method);
+    let steps = (scene.duration_secs() / 0.01).round() as u64;
+    let tets = app
+        .world()
+        .get::<SoftBody>(body)
+        .unwrap()
+        .state()
+        .mesh()
+        .tet_count();
+    let mut r = Run {
+        method: method.name(),
+        tets,
+        steps,
+        times: Vec::new(),
+        error: Vec::new(),
+        mean_abs: Vec::new(),
+        inverted: Vec::new(),
+        peak: 0.0,
+        max_inverted: 0,
+        mean_step_ms: 0.0,
+    };
+    for step in 1..=steps {
+        app.update();
+        let stats = app.world().get::<SoftBodyStats>(body).unwrap();
+        r.times.push(step as f64 * 0.01);
+        r.error.push(stats.volume_error_pct);
+        r.mean_abs.push(stats.mean_abs_tet_error_pct);
+        r.inverted.push(stats.inverted_tets);
+        if verbose && step % 50 == 0 {
+            let world = app.world_mut();
+            let centre = world.get::<Transform>(body).unwrap().translation;
+            let mut spheres = world.query::<(&RigidSphere, &Transform)>();
+            let sphere_y: Vec<String> = spheres
+                .iter(world)
+                .map(|(_, t)| format!("{:.3}", t.translation.y))
+                .collect();
+            let stats = world.get::<SoftBodyStats>(body).unwrap();
+            eprintln!(
+                "{:>10} {:>8} t={:5.2} err={:+7.3}% meanabs={:6.2}% inv={:4} com_y={:.3} spheres_y={:?} step={:.2}ms {:?}",
+                scene.name(),
+                method.name(),
+                step as f64 * 0.01,
+                stats.volume_error_pct,
+                stats.mean_abs_tet_error_pct,
+                stats.inverted_tets,
+                centre.y,
+                sphere_y,
+                stats.step_ms,
+                stats.counters
+            );
+        }
+    }
+    let stats = app.world().get::<SoftBodyStats>(body).unwrap();
+    r.peak = stats.peak_volume_error_pct;
+    r.max_inverted = stats.max_inverted_tets;
+    r.mean_step_ms = stats.mean_step_ms();
+    r
+}
+
+fn main() {
+    let args = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("{e}");
+            std::process::exit(2);
+        }
+    };
+    if let Err(e) = std::fs::create_dir_all(&args.out) {
+        eprintln!("cannot create {}: {e}", args.out.display());
+        std::process::exit(1);
+    }
+    let methods = [
+        VolumeMethod::PAPER_BASELINE,
+        VolumeMethod::Impulses(args.impulses),
+    ];
+    let mut summary = String::from(
+        "scene,method,tets,steps,peak_volume_error_pct,final_volume_error_pct,mean_abs_tet_error_pct,max_inverted_tets,mean_step_ms\n",
+    );
+    let mut all: Vec<(PaperScene, Vec<Run>)> = Vec::new();
+    for &scene in &args.scenes {
+        let runs: Vec<Run> = methods
+            .iter()
+            .map(|&m| run(scene, m, args.verbose))
+            .collect();
+        let mut series = String::from("time_s");
+        for r in &runs {
+            write!(
+                series,
+                ",{m}_volume_error_pct,{m}_mean_abs_tet_error_pct,{m}_inverted_tets",
+                m = r.method
+            )
+            .unwrap();
+        }
+        series.push('\n');
+        for k in 0..runs[0].times.len() {
+            write!(series, "{:.2}", runs[0].times[k]).unwrap();
+            for r in &runs {
+                write!(
+                    series,
+                    ",{:.5},{:.5},{}",
+                    r.error[k], r.mean_abs[k], r.inverted[k]
+                )
+                .unwrap();
+            }
+            series.push('\n');
+        }
+        let path = args.out.join(format!("{}.csv", scene.name()));
+        std::fs::write(&path, series)
+            .unwrap_or_else(|e| panic!("cannot write {}: {e}", path.display()));
+        for r in &runs {
+            writeln!(
+                summary,
+                "{},{},{},{},{:.4},{:.4},{:.4},{},{:.3}",
+                scene.name(),
+                r.method,
+                r.tets,
+                r.steps,
+                r.peak,
+                r.error.last().copied().unwrap_or(0.0),
+                r.mean_abs.last().copied().unwrap_or(0.0),
+                r.max_inverted,
+                r.mean_step_ms
+            )
+            .unwrap();
+        }
+        all.push((scene, runs));
+    }
+    std::fs::write(args.out.join("summary.csv"), &summary).expect("cannot write summary.csv");
+    print!("{}", table(&summary));
+    if let Err(e) = plot(&args.out.join("volume_error.png"), &all) {
+        eprintln!("cannot draw volume_error.png: {e}");
+        std::process::exit(1);
+    }
+}
+
+/// The summary CSV as an aligned table.
+fn table(csv: &str) -> String {
+    let rows: Vec<Vec<&str>> = csv.lines().map(|l| l.split(',').collect()).collect();
+    let widths: Vec<usize> = (0..rows[0].len())
+        .map(|c| rows.iter().map(|r| r[c].len()).max().unwrap_or(0))
+        .collect();
+    let mut out = String::new();
+    for r in &rows {
+        let cells: Vec<String> = r
+            .iter()
+            .zip(&widths)
+            .map(|(c, w)| format!("{c:>w$}"))
+            .collect();
+        out.push_str(&cells.join("  "));
+        out.push('\n');
+    }
+    out
+}
+
+/// The paper's Figure 2: volume error in % over time, both methods, one panel per scene.
+fn plot(
+    path: &std::path::Path,
+    all: &[(PaperScene, Vec<Run>)],
+) -> Result<(), Box<dyn std::error::Error>> {
+    plotters::style::register_font(
+        "sans-serif",
+        FontStyle::Normal,
+        epaint_default_fonts::UBUNTU_LIGHT,
+    )
+    .map_err(|_| "the built-in font is not a valid font")?;
+    let root = BitMapBackend::new(path, (1400, 300 * all.len().max(1) as u32)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let panels = root.split_evenly((all.len().max(1), 1));
+    for ((scene, runs), panel) in all.iter().zip(panels) {
+        let t_max = runs[0].times.last().copied().unwrap_or(1.0);
+        let lo = runs
+            .iter()
+            .flat_map(|r| r.error.iter().copied())
+            .fold(-1.0f64, f64::min);
+        let hi = runs
+            .iter()
+            .flat_map(|r| r.error.iter().copied())
+            .fold(1.0f64, f64::max);
+        let pad = 0.05 * (hi - lo);
+        let mut chart = ChartBuilder::on(&panel)
+            .caption(
+                format!("{} (k_D = {})", scene.name(), scene.distance_stiffness()),
+                ("sans-serif", 22),
+            )
+            .margin(12)
+            .x_label_area_size(36)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))?;
+        chart
+            .configure_mesh()
+            .x_desc("time (s)")
+            .y_desc("volume error (%)")
+            .label_style(("sans-serif", 15))
+            .draw()?;
+        for (r, colour) in runs.iter().zip([RED, BLUE]) {
+            chart
+                .draw_series(LineSeries::new(
+                    r.times.iter().copied().zip(r.error.iter().copied()),
+                    colour.stroke_width(2),
+                ))?
+                .label(format!("{} (peak {:.2} %)", r.method, r.peak))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 16))
+            .draw()?;
+    }
+    root.present()?;
+    Ok(())
+}
