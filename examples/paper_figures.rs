@@ -119,7 +119,14 @@ fn run(scene: PaperScene, method: VolumeMethod, verbose: bool) -> Run {
         r.error.push(stats.volume_error_pct);
         r.mean_abs.push(stats.mean_abs_tet_error_pct);
         r.inverted.push(stats.inverted_tets);
-        if verbose && step % 50 == 0 {
+        if verbose
+            && step
+                % std::env::var("EVERY")
+                    .ok()
+                    .and_then(|v| v.parse().ok())
+                    .unwrap_or(50)
+                == 0
+        {
             let world = app.world_mut();
             let centre = world.get::<Transform>(body).unwrap().translation;
             let mut spheres = world.query::<(&RigidSphere, &Transform)>();

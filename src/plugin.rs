@@ -75,7 +75,8 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<SoftBodyStats>()
             .register_type::<PinnedParticles>()
             .register_type::<DrivenParticles>()
-            .register_type::<RigidSphere>();
+            .register_type::<RigidSphere>()
+            .init_resource::<SolverSpheres>();
         if let Some(step) = self.time_step
             && self.schedule == FixedUpdate.intern()
         {
@@ -213,33 +214,20 @@ fn prepare(
     }
 }
 
-fn apply_forces(
-    time: Res<Time>,
-    gravity: Res<SoftBodyGravity>,
-    mut bodies: Query<&mut SoftBody>,
-    mut spheres: Query<&mut RigidSphere>,
-) {
-    let h = time.delta_secs();
-    if h <= 0.0 {
-        return;
-    }
-    for mut body in &mut bodies {
-        timed(&mut body, |s| s.apply_forces(h, gravity.0));
-    }
-    for mut sphere in &mut spheres {
-        if sphere.mass.is_finite() {
-            sphere.velocity += h * gravity.0;
-        }
-    }
-}
-
-/// Reused buffers for the contact passes, so that a step does not allocate.
-#[derive(Default)]
-struct ContactBuffers {
-    colliders: Vec<ColliderInstance>,
-    spheres: Vec<(Entity, RigidSphereState)>,
+/// The rigid spheres as the solver sees them during one step: gathered from the
+/// [`RigidSphere`] components in [`SoftBodySet::Forces`], changed by the contact and volume
+/// passes (particles pressed against a sphere move it), written back in
+/// [`SoftBodySet::Integrate`].
+#[derive(Resource, Default)]
+pub struct SolverSpheres {
+    entities: Vec<Entity>,
     states: Vec<RigidSphereState>,
 }
+
+/// Static colliders as the solver sees them during one step (reused, so a step does not
+/// allocate).
+#[derive(Default)]
+struct SolverColliders(Vec<ColliderInstance>);
 
 fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState {
     let inv_mass = if sphere.mass.is_finite() && sphere.mass > 0.0 {
@@ -256,55 +244,69 @@ fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState
     }
 }
 
+fn apply_forces(
+    time: Res<Time>,
+    gravity: Res<SoftBodyGravity>,
+    mut solver_spheres: ResMut<SolverSpheres>,
+    mut bodies: Query<&mut SoftBody>,
+    spheres: Query<(Entity, &RigidSphere, &Transform)>,
+) {
+    let h = time.delta_secs();
+    if h <= 0.0 {
+        return;
+    }
+    for mut body in &mut bodies {
+        timed(&mut body, |s| s.apply_forces(h, gravity.0));
+    }
+    let solver_spheres = &mut *solver_spheres;
+    solver_spheres.entities.clear();
+    solver_spheres.states.clear();
+    for (entity, sphere, transform) in &spheres {
+        let mut state = sphere_state(sphere, transform);
+        state.apply_forces(h, gravity.0);
+        solver_spheres.entities.push(entity);
+        solver_spheres.states.push(state);
+    }
+}
+
 /// One contact pass over everything: spheres against static colliders, then particles against
 /// spheres, then particles against static colliders (last, so that no particle is left inside
 /// the ground by a sphere pushing it).
 fn contact_pass(
     h: f32,
-    buffers: &mut ContactBuffers,
+    colliders: &mut SolverColliders,
+    spheres: &mut [RigidSphereState],
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    spheres: &mut Query<(Entity, &mut RigidSphere, &mut Transform)>,
-    colliders: &Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
+    collider_query: &Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
-    buffers.colliders.clear();
-    for (collider, transform) in colliders {
+    colliders.0.clear();
+    for (collider, transform) in collider_query {
         let pose = Pose::from_parts(transform.translation, transform.rotation);
-        buffers.colliders.push(ColliderInstance::new(
+        colliders.0.push(ColliderInstance::new(
             collider.shape.clone(),
             pose,
             collider.friction,
         ));
     }
-    buffers.states.clear();
-    buffers.spheres.clear();
-    for (entity, sphere, transform) in spheres.iter() {
-        let mut state = sphere_state(sphere, &transform);
-        state.resolve_static_contacts(h, &buffers.colliders);
-        buffers.spheres.push((entity, state));
-        buffers.states.push(state);
+    for sphere in spheres.iter_mut() {
+        sphere.resolve_static_contacts(h, &colliders.0);
     }
     for (mut body, mut stats) in bodies.iter_mut() {
         let mut contacts = 0;
-        let (states, colliders) = (&mut buffers.states, &buffers.colliders);
         timed(&mut body, |s| {
-            contacts += s.resolve_sphere_contacts(h, states);
-            contacts += s.resolve_static_contacts(h, colliders);
+            contacts += s.resolve_sphere_contacts(h, spheres);
+            contacts += s.resolve_static_contacts(h, &colliders.0);
         });
         stats.contacts += contacts;
-    }
-    for ((entity, _), state) in buffers.spheres.iter().zip(&buffers.states) {
-        if let Ok((_, mut sphere, _)) = spheres.get_mut(*entity) {
-            sphere.velocity = state.velocity;
-        }
     }
 }
 
 fn resolve_contacts(
     time: Res<Time>,
-    mut buffers: Local<ContactBuffers>,
+    mut colliders: Local<SolverColliders>,
+    mut spheres: ResMut<SolverSpheres>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    mut spheres: Query<(Entity, &mut RigidSphere, &mut Transform)>,
-    colliders: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
+    collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -313,26 +315,32 @@ fn resolve_contacts(
     for (_, mut stats) in &mut bodies {
         stats.contacts = 0;
     }
-    contact_pass(h, &mut buffers, &mut bodies, &mut spheres, &colliders);
+    contact_pass(
+        h,
+        &mut colliders,
+        &mut spheres.states,
+        &mut bodies,
+        &collider_query,
+    );
 }
 
-fn one_ring(time: Res<Time>, mut bodies: Query<&mut SoftBody>) {
+fn one_ring(time: Res<Time>, mut spheres: ResMut<SolverSpheres>, mut bodies: Query<&mut SoftBody>) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
     for mut body in &mut bodies {
-        timed(&mut body, |s| s.one_ring_pass(h));
+        timed(&mut body, |s| s.one_ring_pass(h, &mut spheres.states));
     }
 }
 
-fn per_tet(time: Res<Time>, mut bodies: Query<&mut SoftBody>) {
+fn per_tet(time: Res<Time>, mut spheres: ResMut<SolverSpheres>, mut bodies: Query<&mut SoftBody>) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
     for mut body in &mut bodies {
-        timed(&mut body, |s| s.per_tet_pass(h));
+        timed(&mut body, |s| s.per_tet_pass(h, &mut spheres.states));
     }
 }
 
@@ -348,22 +356,38 @@ fn plasticity(time: Res<Time>, mut bodies: Query<&mut SoftBody>) {
 
 fn integrate(
     time: Res<Time>,
-    mut buffers: Local<ContactBuffers>,
+    mut colliders: Local<SolverColliders>,
+    mut solver_spheres: ResMut<SolverSpheres>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    mut spheres: Query<(Entity, &mut RigidSphere, &mut Transform)>,
-    colliders: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
+    collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
+    mut spheres: Query<(&mut RigidSphere, &mut Transform), Without<StaticCollider>>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
-    contact_pass(h, &mut buffers, &mut bodies, &mut spheres, &colliders);
+    let solver_spheres = &mut *solver_spheres;
+    contact_pass(
+        h,
+        &mut colliders,
+        &mut solver_spheres.states,
+        &mut bodies,
+        &collider_query,
+    );
     for (mut body, mut stats) in &mut bodies {
         timed(&mut body, |s| s.integrate_positions(h));
         stats.steps += 1;
     }
-    for (_, sphere, mut transform) in &mut spheres {
-        transform.translation += h * sphere.velocity;
+    for (entity, state) in solver_spheres
+        .entities
+        .iter()
+        .zip(&mut solver_spheres.states)
+    {
+        state.integrate_position(h);
+        if let Ok((mut sphere, mut transform)) = spheres.get_mut(*entity) {
+            sphere.velocity = state.velocity;
+            transform.translation = state.position;
+        }
     }
 }
 

@@ -37,10 +37,40 @@ pub enum PaperScene {
     Plastic,
 }
 
-/// Cell size of the grid meshes, in metres.
+/// Cell size of the box grids, in metres.
 pub const CELL: f32 = 0.1;
-/// Density of every scene's body, kg/m^3.
-pub const DENSITY: f32 = 1000.0;
+
+/// The rigid sphere of a scene.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneSphere {
+    /// Radius, m.
+    pub radius: f32,
+    /// Mass, kg.
+    pub mass: f32,
+    /// Downward speed at spawn, m/s.
+    pub speed: f32,
+    /// Gap between the sphere and the top of the body at spawn, m.
+    pub gap: f32,
+    /// Despawned after this many seconds (the plastic scene takes its sphere away).
+    pub remove_after: Option<f32>,
+}
+
+/// Everything the paper leaves open about a scene, chosen here (see the module documentation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SceneParams {
+    /// Body density, kg/m^3.
+    pub density: f32,
+    /// Spring damping.
+    pub damping: f32,
+    /// Gravity, m/s^2 (downwards).
+    pub gravity: f32,
+    /// Height of the body's lowest point above the ground at spawn, m.
+    pub lift: f32,
+    /// The sphere, if the scene has one.
+    pub sphere: Option<SceneSphere>,
+    /// Simulated seconds.
+    pub duration_secs: f32,
+}
 
 impl PaperScene {
     /// All five, in the paper's order.
@@ -68,17 +98,6 @@ impl PaperScene {
         PaperScene::ALL.into_iter().find(|s| s.name() == name)
     }
 
-    /// Simulated seconds the scene runs for.
-    pub fn duration_secs(self) -> f32 {
-        match self {
-            PaperScene::BarTwist => 8.0,
-            PaperScene::SphereOnBar => 6.0,
-            PaperScene::SoftCube => 8.0,
-            PaperScene::Creature => 8.0,
-            PaperScene::Plastic => 8.0,
-        }
-    }
-
     /// The paper's `k_D` for the scene.
     pub fn distance_stiffness(self) -> f32 {
         match self {
@@ -90,30 +109,89 @@ impl PaperScene {
         }
     }
 
-    /// Gravity of the scene (see the module documentation for why it is weak).
-    pub fn gravity(self) -> Vec3 {
-        Vec3::new(
-            0.0,
-            match self {
-                PaperScene::BarTwist => 0.0,
-                PaperScene::SphereOnBar => -1.0,
-                PaperScene::SoftCube => -0.5,
-                PaperScene::Creature => -1.0,
-                PaperScene::Plastic => -1.0,
+    /// Sizes, masses, gravity and timing of the scene. Why these: the module documentation and
+    /// `README.md`. Denser bodies (soft cube, plastic) keep the explicit baseline stable under
+    /// their loads; their gravity is weaker in proportion, so that they carry their own weight.
+    pub fn params(self) -> SceneParams {
+        match self {
+            PaperScene::BarTwist => SceneParams {
+                density: 1000.0,
+                damping: 1.0,
+                gravity: 0.0,
+                lift: 0.0,
+                sphere: None,
+                duration_secs: 8.0,
             },
-            0.0,
-        )
+            PaperScene::SphereOnBar => SceneParams {
+                density: 1000.0,
+                damping: 1.0,
+                gravity: 0.2,
+                lift: 1.0,
+                sphere: Some(SceneSphere {
+                    radius: 0.3,
+                    mass: 250.0,
+                    speed: 1.0,
+                    gap: 0.5,
+                    remove_after: None,
+                }),
+                duration_secs: 6.0,
+            },
+            PaperScene::SoftCube => SceneParams {
+                density: 8000.0,
+                damping: 4.0,
+                gravity: 0.02,
+                lift: 0.0,
+                sphere: Some(SceneSphere {
+                    radius: 0.4,
+                    mass: 3000.0,
+                    speed: 0.4,
+                    gap: 0.3,
+                    remove_after: None,
+                }),
+                duration_secs: 8.0,
+            },
+            PaperScene::Creature => SceneParams {
+                density: 1000.0,
+                damping: 1.0,
+                gravity: 0.3,
+                lift: 0.5,
+                sphere: None,
+                duration_secs: 8.0,
+            },
+            PaperScene::Plastic => SceneParams {
+                density: 4000.0,
+                damping: 2.0,
+                gravity: 1.0,
+                lift: 0.0,
+                sphere: Some(SceneSphere {
+                    radius: 0.35,
+                    mass: 1200.0,
+                    speed: 1.0,
+                    gap: 0.2,
+                    remove_after: Some(3.0),
+                }),
+                duration_secs: 8.0,
+            },
+        }
+    }
+
+    /// Simulated seconds the scene runs for.
+    pub fn duration_secs(self) -> f32 {
+        self.params().duration_secs
+    }
+
+    /// Gravity of the scene.
+    pub fn gravity(self) -> Vec3 {
+        Vec3::new(0.0, -self.params().gravity, 0.0)
     }
 
     /// The body's material with `method`.
     pub fn material(self, method: VolumeMethod) -> SoftBodyMaterial {
+        let params = self.params();
         SoftBodyMaterial {
-            density: DENSITY,
+            density: params.density,
             distance_stiffness: self.distance_stiffness(),
-            damping: match self {
-                PaperScene::Plastic => 4.0,
-                _ => 1.0,
-            },
+            damping: params.damping,
             friction: 0.6,
             method,
             plasticity: (self == PaperScene::Plastic).then_some(Plasticity {
@@ -141,26 +219,45 @@ impl PaperScene {
     /// copies side by side). Sets the gravity resource. Returns the body entity.
     pub fn spawn(self, commands: &mut Commands, method: VolumeMethod, offset: Vec3) -> Entity {
         commands.insert_resource(SoftBodyGravity(self.gravity()));
+        let params = self.params();
         let mesh = self.tet_mesh();
         let body =
             SoftBody::new(mesh.clone(), self.material(method)).expect("scene materials are valid");
         let (lo, hi) = mesh.bounds();
         let size = hi - lo;
-        let ground = || {
-            (
+        let place = offset + Vec3::new(0.0, params.lift, 0.0);
+        let body_entity = commands
+            .spawn((
+                body,
+                Transform::from_translation(place),
+                Name::new(self.name()),
+            ))
+            .id();
+        if self != PaperScene::BarTwist {
+            commands.spawn((
                 StaticCollider::ground(0.8),
                 Transform::from_translation(offset),
                 Name::new("ground"),
-            )
-        };
+            ));
+        }
+        if let Some(s) = params.sphere {
+            let mut sphere = RigidSphere::new(s.radius, s.mass);
+            sphere.velocity = Vec3::new(0.0, -s.speed, 0.0);
+            let centre = place + Vec3::new(size.x / 2.0, size.y + s.radius + s.gap, size.z / 2.0);
+            let mut entity = commands.spawn((
+                sphere,
+                Transform::from_translation(centre),
+                Name::new("sphere"),
+            ));
+            if let Some(t) = s.remove_after {
+                entity.insert(RemoveAfter(t));
+            }
+        }
         match self {
             PaperScene::BarTwist => {
-                let body_entity = commands
-                    .spawn((body, Transform::from_translation(offset), Name::new("bar")))
-                    .id();
                 let end = particles_where(&mesh, |p| p.x >= hi.x - 1e-4);
                 let held = particles_where(&mesh, |p| p.x <= lo.x + 1e-4);
-                let centre = offset + Vec3::new(hi.x, size.y / 2.0, size.z / 2.0);
+                let centre = place + Vec3::new(hi.x, size.y / 2.0, size.z / 2.0);
                 let handle = commands
                     .spawn((
                         Transform::from_translation(centre),
@@ -177,86 +274,14 @@ impl PaperScene {
                 commands
                     .entity(body_entity)
                     .insert((PinnedParticles(held), DrivenParticles::new(handle, end)));
-                body_entity
             }
             PaperScene::SphereOnBar => {
-                let lift = Vec3::new(0.0, 1.0, 0.0);
-                let body_entity = commands
-                    .spawn((
-                        body,
-                        Transform::from_translation(offset + lift),
-                        Name::new("bar"),
-                    ))
-                    .id();
                 let ends = particles_where(&mesh, |p| p.x <= lo.x + 1e-4 || p.x >= hi.x - 1e-4);
                 commands.entity(body_entity).insert(PinnedParticles(ends));
-                let radius = 0.3;
-                let mut sphere = RigidSphere::new(radius, 150.0);
-                sphere.velocity = Vec3::new(0.0, -3.0, 0.0);
-                commands.spawn((
-                    sphere,
-                    Transform::from_translation(
-                        offset
-                            + lift
-                            + Vec3::new(size.x / 2.0, size.y + radius + 0.5, size.z / 2.0),
-                    ),
-                    Name::new("sphere"),
-                ));
-                commands.spawn(ground());
-                body_entity
             }
-            PaperScene::SoftCube => {
-                let body_entity = commands
-                    .spawn((body, Transform::from_translation(offset), Name::new("cube")))
-                    .id();
-                let radius = 0.4;
-                let mut sphere = RigidSphere::new(radius, 600.0);
-                sphere.velocity = Vec3::new(0.0, -2.0, 0.0);
-                commands.spawn((
-                    sphere,
-                    Transform::from_translation(
-                        offset + Vec3::new(size.x / 2.0, size.y + radius + 0.3, size.z / 2.0),
-                    ),
-                    Name::new("heavy sphere"),
-                ));
-                commands.spawn(ground());
-                body_entity
-            }
-            PaperScene::Creature => {
-                let drop = Vec3::new(0.0, 1.0, 0.0);
-                let body_entity = commands
-                    .spawn((
-                        body,
-                        Transform::from_translation(offset + drop),
-                        Name::new("creature"),
-                    ))
-                    .id();
-                commands.spawn(ground());
-                body_entity
-            }
-            PaperScene::Plastic => {
-                let body_entity = commands
-                    .spawn((
-                        body,
-                        Transform::from_translation(offset),
-                        Name::new("block"),
-                    ))
-                    .id();
-                let radius = 0.35;
-                let mut sphere = RigidSphere::new(radius, 800.0);
-                sphere.velocity = Vec3::new(0.0, -3.0, 0.0);
-                commands.spawn((
-                    sphere,
-                    Transform::from_translation(
-                        offset + Vec3::new(size.x / 2.0, size.y + radius + 0.2, size.z / 2.0),
-                    ),
-                    RemoveAfter(3.0),
-                    Name::new("heavy sphere"),
-                ));
-                commands.spawn(ground());
-                body_entity
-            }
+            PaperScene::SoftCube | PaperScene::Creature | PaperScene::Plastic => {}
         }
+        body_entity
     }
 }
 
@@ -407,8 +432,8 @@ pub fn creature_tet_mesh() -> Result<TetMesh, crate::core::GridError> {
     sdf_grid(creature_sdf, lo, hi, CREATURE_CELL)
 }
 
-/// Cell size of the creature's tet grid.
-pub const CREATURE_CELL: f32 = 0.1;
+/// Cell size of the creature's tet grid, chosen for about 6500 tets.
+pub const CREATURE_CELL: f32 = 0.1144;
 
 /// A headless app (`MinimalPlugins`, time advancing exactly one 10 ms step per update) with the
 /// plugin, the scene drivers and `scene` spawned with `method`. Returns the app and the body.

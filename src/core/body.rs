@@ -18,6 +18,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients};
 use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
 use super::tet_mesh::TetMesh;
@@ -61,6 +62,8 @@ pub struct StepCounters {
     pub tets_without_root: u32,
     /// Tets whose per-tet impulse the neighbour clamp shortened.
     pub tets_clamped: u32,
+    /// Particles whose velocity was not finite and was reset to zero.
+    pub non_finite_velocities: u32,
 }
 
 /// One soft body: the particles of its tet mesh and the springs on its edges.
@@ -84,6 +87,16 @@ pub struct SoftBodyState {
     /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
     /// passes. Kept zero between uses so that the passes never clear the whole array.
     pub(crate) scratch: Vec<Vec3>,
+    /// Per particle, the outward unit normal of what it touches this step (zero if nothing).
+    pub(crate) contact_normals: Vec<Vec3>,
+    /// Per particle in contact, the share `f` of a push into the contact that the particle keeps:
+    /// 0 against a static collider, `w_s / (w_p + w_s)` against a sphere.
+    pub(crate) contact_kept: Vec<f32>,
+    /// Per particle in contact with a sphere, that sphere's index in the slice the passes get;
+    /// `u32::MAX` otherwise.
+    pub(crate) contact_sphere: Vec<u32>,
+    /// The particles with a non-zero entry in `contact_normals`, to clear them cheaply.
+    pub(crate) touching: Vec<u32>,
     pub(crate) counters: StepCounters,
 }
 
@@ -108,6 +121,10 @@ impl SoftBodyState {
             spring_rest0,
             material,
             scratch: vec![Vec3::ZERO; n],
+            contact_normals: vec![Vec3::ZERO; n],
+            contact_kept: vec![0.0; n],
+            contact_sphere: vec![u32::MAX; n],
+            touching: Vec::new(),
             counters: StepCounters::default(),
             mesh,
         };
@@ -215,9 +232,70 @@ impl SoftBodyState {
         Ok(())
     }
 
-    /// Starts a step: clears the counters.
+    /// Starts a step: clears the counters and last step's contacts.
     pub fn begin_step(&mut self) {
         self.counters = StepCounters::default();
+        for &i in &self.touching {
+            self.contact_normals[i as usize] = Vec3::ZERO;
+            self.contact_sphere[i as usize] = u32::MAX;
+        }
+        self.touching.clear();
+    }
+
+    /// `d` with its push into what particle `i` touches reduced to the part the particle keeps:
+    /// a volume impulse cannot move a particle into the ground at all, and moves a particle
+    /// pressed against a heavy sphere only as far as the pair moves together. The cubic is then
+    /// solved for the motion the particle can make, so the last contact pass does not undo it.
+    #[inline]
+    pub(crate) fn constrain_direction(&self, i: usize, d: Vec3) -> Vec3 {
+        let n = self.contact_normals[i];
+        let into = d.dot(n);
+        if into < 0.0 {
+            d - n * (into * (1.0 - self.contact_kept[i]))
+        } else {
+            d
+        }
+    }
+
+    /// Records that particle `i` touches a surface with outward unit `normal`, keeping the share
+    /// `kept` of pushes into it; `sphere` is the sphere's index, if it is one.
+    #[inline]
+    pub(crate) fn record_contact(
+        &mut self,
+        i: usize,
+        normal: Vec3,
+        kept: f32,
+        sphere: Option<usize>,
+    ) {
+        if self.contact_normals[i] == Vec3::ZERO {
+            self.touching.push(i as u32);
+        }
+        self.contact_normals[i] = normal;
+        self.contact_kept[i] = kept;
+        self.contact_sphere[i] = sphere.map_or(u32::MAX, |k| k as u32);
+    }
+
+    /// Adds `dv` to particle `i`'s velocity; if `i` is pressed against a sphere and `dv` pushes
+    /// into it, the sphere moves along with the particle (the push was already reduced to the
+    /// pair's share by `constrain_direction`), so momentum is conserved.
+    #[inline]
+    pub(crate) fn apply_velocity_change(
+        &mut self,
+        i: usize,
+        dv: Vec3,
+        spheres: &mut [RigidSphereState],
+    ) {
+        self.velocities[i] += dv;
+        let k = self.contact_sphere[i];
+        if k != u32::MAX
+            && let Some(sphere) = spheres.get_mut(k as usize)
+        {
+            let n = self.contact_normals[i];
+            let into = dv.dot(n);
+            if into < 0.0 {
+                sphere.velocity += n * into;
+            }
+        }
     }
 
     /// Stage 1: external, spring and (baseline) volume forces change the velocities.
@@ -289,9 +367,15 @@ impl SoftBodyState {
         }
     }
 
-    /// Stage 6: `x += h v`.
+    /// Stage 6: `x += h v`. A velocity that is not finite (only an unstable explicit baseline
+    /// can produce one) is reset to zero and counted, so that one bad particle cannot turn the
+    /// whole body, the spheres it touches and the game's transforms into NaN.
     pub fn integrate_positions(&mut self, h: f32) {
-        for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
+        for (x, v) in self.positions.iter_mut().zip(&mut self.velocities) {
+            if !v.is_finite() {
+                *v = Vec3::ZERO;
+                self.counters.non_finite_velocities += 1;
+            }
             *x += h * *v;
         }
     }
@@ -355,8 +439,8 @@ impl SoftBodyState {
     pub fn step_free(&mut self, h: f32, gravity: Vec3) {
         self.begin_step();
         self.apply_forces(h, gravity);
-        self.one_ring_pass(h);
-        self.per_tet_pass(h);
+        self.one_ring_pass(h, &mut []);
+        self.per_tet_pass(h, &mut []);
         self.apply_plasticity(h);
         self.integrate_positions(h);
     }

@@ -7,6 +7,12 @@
 //! the change is shared by inverse mass, so the sphere is pushed back (two-way coupling) and
 //! momentum is conserved. Kinematic particles (inverse mass zero) are not touched.
 //!
+//! A particle in contact remembers the contact normal until the next step, and the volume passes
+//! keep only the share of a push into the contact that the particle would keep after the last
+//! contact pass (see `SoftBodyState::constrain_direction`): none against a static collider,
+//! `w_s / (w_p + w_s)` against a sphere, whose push back on the particle is what lets a soft
+//! body carry it.
+//!
 //! The combined friction of two surfaces is the geometric mean of their coefficients.
 
 use glam::Vec3;
@@ -57,6 +63,9 @@ pub struct RigidSphereState {
     pub friction: f32,
 }
 
+/// Fastest speed, in m/s, at which a particle already inside a sphere is pushed out of it.
+pub const MAX_DEPENETRATION_SPEED: f32 = 1.0;
+
 #[inline]
 fn combined_friction(a: f32, b: f32) -> f32 {
     (a * b).sqrt()
@@ -102,6 +111,7 @@ impl SoftBodyState {
                 let vt = v - n * v.dot(n);
                 v += friction_change(vt, combined_friction(friction, c.friction) * dvn);
                 self.velocities[i] = v;
+                self.record_contact(i, n, 0.0, None);
                 contacts += 1;
             }
         }
@@ -113,7 +123,7 @@ impl SoftBodyState {
     pub fn resolve_sphere_contacts(&mut self, h: f32, spheres: &mut [RigidSphereState]) -> u32 {
         let mut contacts = 0;
         let friction = self.material.friction;
-        for s in spheres.iter_mut() {
+        for (k, s) in spheres.iter_mut().enumerate() {
             let reach = s.radius + h * s.velocity.length();
             let centre_now = s.position;
             for i in 0..self.positions.len() {
@@ -133,7 +143,13 @@ impl SoftBodyState {
                 }
                 let n = if dist > 0.0 { offset / dist } else { Vec3::Y };
                 let w_sum = w + s.inv_mass;
-                let lambda = (s.radius - dist) / h / w_sum;
+                // Remove the approach fully, but push out penetration that is already there at
+                // a bounded speed: a particle squeezed between a sphere and the ground cannot
+                // satisfy both, and full-speed push-outs would pump energy into it each step.
+                let existing = (s.radius - self.positions[i].distance(s.position)).max(0.0);
+                let correction =
+                    (s.radius - dist).min(s.radius - dist - existing + MAX_DEPENETRATION_SPEED * h);
+                let lambda = correction / h / w_sum;
                 self.velocities[i] += n * (lambda * w);
                 s.velocity -= n * (lambda * s.inv_mass);
                 let rel = self.velocities[i] - s.velocity;
@@ -145,6 +161,7 @@ impl SoftBodyState {
                     self.velocities[i] -= t * (jt * w);
                     s.velocity += t * (jt * s.inv_mass);
                 }
+                self.record_contact(i, n, s.inv_mass / w_sum, Some(k));
                 contacts += 1;
             }
         }

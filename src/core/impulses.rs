@@ -18,9 +18,10 @@
 //! - Cubic without such a root: no impulse (counted in [`StepCounters`]); the next step
 //!   tries again from new positions. Forcing a step there could only overshoot.
 //! - All directions zero (ring at rest volume, or all its particles kinematic): skipped.
-//! - A tet touched by an impulse that is already below `eps = V0 / 2` must not get smaller:
-//!   its floor becomes its current volume, so the clamp stops the impulse where that tet would
-//!   start to shrink (possibly at once).
+//! - A tet touched by an impulse that is already below `eps = V0 / 2` may lose at most
+//!   [`CLAMP_SLACK`] of its rest volume per impulse. Forbidding it to shrink at all (the first
+//!   rule tried) froze every impulse near a crushed region, including those that re-inflate it:
+//!   under a heavy sphere the soft cube then lost 38 % of its volume instead of under 2 %.
 //! - The per-tet correction is clamped at the step actually applied (`gamma * s*`), not at
 //!   `s*`: only what is applied can harm a neighbour.
 //!
@@ -29,6 +30,7 @@
 use glam::Vec3;
 
 use super::body::SoftBodyState;
+use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients, volume_polynomial};
 use super::material::VolumeMethod;
 use super::roots::{Cubic, first_crossing, monotone_root};
@@ -64,13 +66,18 @@ pub enum ImpulseOutcome {
 /// and fully again once its tets agree.
 pub const RING_STEP_LIMIT: f64 = 1.0;
 
+/// How much of its rest volume a tet that is already below `eps` may lose in one impulse.
+pub const CLAMP_SLACK: f32 = 0.1;
+
 /// Fraction of the rest volume below which the clamp does not let a touched tet go (`eps`).
 pub const CLAMP_FRACTION: f32 = 0.5;
 
 impl SoftBodyState {
     /// Stage 3: one impulse per vertex restoring the volume of its one-ring (section 5).
     /// Does nothing for the baseline or when the one-ring switch is off.
-    pub fn one_ring_pass(&mut self, h: f32) {
+    /// `spheres` are the rigid spheres of the last contact pass, in the same order: particles
+    /// pressed against one move it along.
+    pub fn one_ring_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
         let VolumeMethod::Impulses(settings) = self.material.method else {
             return;
         };
@@ -78,13 +85,14 @@ impl SoftBodyState {
             return;
         }
         for p in 0..self.positions.len() {
-            self.ring_impulse(p, h, settings.neighbour_clamp);
+            self.ring_impulse(p, h, settings.neighbour_clamp, spheres);
         }
     }
 
     /// Stage 4: one impulse per tet towards its own rest volume, scaled by `gamma` (section 4,
     /// end of section 5). Does nothing for the baseline or when the per-tet switch is off.
-    pub fn per_tet_pass(&mut self, h: f32) {
+    /// `spheres` as for [`SoftBodyState::one_ring_pass`].
+    pub fn per_tet_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
         let VolumeMethod::Impulses(settings) = self.material.method else {
             return;
         };
@@ -92,14 +100,26 @@ impl SoftBodyState {
             return;
         }
         for t in 0..self.mesh.tet_count() {
-            self.tet_impulse(t, h, settings.gamma as f64, settings.neighbour_clamp);
+            self.tet_impulse(
+                t,
+                h,
+                settings.gamma as f64,
+                settings.neighbour_clamp,
+                spheres,
+            );
         }
     }
 
     /// The one-ring impulse of vertex `p`: every particle of the ring moves by `s * D_i`, where
     /// `D_i` sums the directions of the ring's tets that contain it, and `s` is the smallest
     /// positive root of `sum_t V_t(s) = sum_t V0_t`.
-    pub fn ring_impulse(&mut self, p: usize, h: f32, clamp: bool) -> ImpulseOutcome {
+    pub fn ring_impulse(
+        &mut self,
+        p: usize,
+        h: f32,
+        clamp: bool,
+        spheres: &mut [RigidSphereState],
+    ) -> ImpulseOutcome {
         let mesh = self.mesh.clone();
         let ring = mesh.one_ring(p);
         let vertices = mesh.ring_vertices(p);
@@ -133,6 +153,12 @@ impl SoftBodyState {
             self.clear_directions(vertices);
             return ImpulseOutcome::Skipped;
         }
+        if !self.touching.is_empty() {
+            for &i in vertices {
+                let i = i as usize;
+                self.scratch[i] = self.constrain_direction(i, self.scratch[i]);
+            }
+        }
         let mut poly: Cubic = [-rest, 0.0, 0.0, 0.0];
         for &t in ring {
             let c = self.moved_volume(mesh.tets()[t as usize], h);
@@ -165,7 +191,7 @@ impl SoftBodyState {
         let scale = (step / h as f64) as f32;
         for &i in vertices {
             let i = i as usize;
-            self.velocities[i] += scale * self.scratch[i];
+            self.apply_velocity_change(i, scale * self.scratch[i], spheres);
             self.scratch[i] = Vec3::ZERO;
         }
         ImpulseOutcome::Applied {
@@ -177,7 +203,14 @@ impl SoftBodyState {
 
     /// The per-tet impulse of tet `t`: its four particles move by `gamma * s * d_i`, `s` being the
     /// smallest positive root of `V_t(s) = V0_t`.
-    pub fn tet_impulse(&mut self, t: usize, h: f32, gamma: f64, clamp: bool) -> ImpulseOutcome {
+    pub fn tet_impulse(
+        &mut self,
+        t: usize,
+        h: f32,
+        gamma: f64,
+        clamp: bool,
+        spheres: &mut [RigidSphereState],
+    ) -> ImpulseOutcome {
         let mesh = self.mesh.clone();
         let tet = mesh.tets()[t];
         let v0 = mesh.rest_volumes()[t];
@@ -187,7 +220,10 @@ impl SoftBodyState {
             return ImpulseOutcome::Skipped;
         }
         let g = volume_gradients(&xp);
-        let d: [Vec3; 4] = std::array::from_fn(|k| -self.inv_masses[tet[k] as usize] * c * g[k]);
+        let d: [Vec3; 4] = std::array::from_fn(|k| {
+            let i = tet[k] as usize;
+            self.constrain_direction(i, -self.inv_masses[i] * c * g[k])
+        });
         if d.iter().all(|&x| x == Vec3::ZERO) {
             return ImpulseOutcome::Skipped;
         }
@@ -218,7 +254,7 @@ impl SoftBodyState {
         self.counters.tets_clamped += clamped as u32;
         let scale = (step / h as f64) as f32;
         for k in 0..4 {
-            self.velocities[tet[k] as usize] += scale * d[k];
+            self.apply_velocity_change(tet[k] as usize, scale * d[k], spheres);
         }
         ImpulseOutcome::Applied {
             step,
@@ -237,7 +273,8 @@ impl SoftBodyState {
     }
 
     /// The neighbour clamp: the largest `s' <= step` such that every tet in `tets` keeps at
-    /// least `eps = V0 / 2` (or, if it is already below, its current volume) for every step in
+    /// least `eps = V0 / 2` (or, if it is already below, its current volume less
+    /// [`CLAMP_SLACK`] of its rest volume) for every step in
     /// `[0, s']` along the directions in `scratch`. `max_move` is the longest direction, used
     /// to skip tets that cannot come near their floor without solving their cubic.
     fn neighbour_clamp<'a>(
@@ -253,7 +290,12 @@ impl SoftBodyState {
             let xp = tet.map(|i| self.preview(i, h));
             let v0 = mesh.rest_volumes()[t as usize];
             let volume = signed_volume(&xp);
-            let floor = (CLAMP_FRACTION * v0).min(volume);
+            let eps = CLAMP_FRACTION * v0;
+            let floor = if volume >= eps {
+                eps
+            } else {
+                volume - CLAMP_SLACK * v0
+            };
             // Each edge vector from vertex d changes by at most 2 * delta; bound the change of
             // the determinant from that, and skip the cubic when the floor is out of reach.
             let delta = 2.0 * step as f32 * max_move;
@@ -263,20 +305,15 @@ impl SoftBodyState {
                 .max((xp[2] - xp[3]).length());
             let bound =
                 (3.0 * delta * l * l + 3.0 * delta * delta * l + delta * delta * delta) / 6.0;
-            if volume - bound > floor && volume > floor {
+            if volume - bound > floor {
                 continue;
             }
             let mut c = self.moved_volume(tet, h);
             if c[1] == 0.0 && c[2] == 0.0 && c[3] == 0.0 {
                 continue;
             }
-            // Measure from the polynomial's own value at 0, so that a tet already at its floor
-            // starts exactly at zero.
-            c[0] -= if volume < CLAMP_FRACTION * v0 {
-                c[0]
-            } else {
-                (CLAMP_FRACTION * v0) as f64
-            };
+            // A tet at its floor may sit a rounding error below it: start it exactly there.
+            c[0] = (c[0] - floor as f64).max(0.0);
             if let Some(s) = first_crossing(&c, step) {
                 step = s;
                 if step == 0.0 {
@@ -338,7 +375,7 @@ mod tests {
         let mut applied = 0;
         for p in 0..body.positions.len() {
             let before = body.linear_momentum();
-            let outcome = body.ring_impulse(p, H, true);
+            let outcome = body.ring_impulse(p, H, true, &mut []);
             let after = body.linear_momentum();
             if let ImpulseOutcome::Applied { .. } = outcome {
                 applied += 1;
@@ -350,7 +387,7 @@ mod tests {
         }
         for t in 0..body.mesh.tet_count() {
             let before = body.linear_momentum();
-            body.tet_impulse(t, H, 0.125, true);
+            body.tet_impulse(t, H, 0.125, true, &mut []);
             let after = body.linear_momentum();
             assert!(
                 (after - before).length() < 1e-4,
@@ -373,7 +410,9 @@ mod tests {
                 .iter()
                 .map(|&t| body.mesh.rest_volumes()[t as usize])
                 .sum();
-            if let ImpulseOutcome::Applied { step, root, .. } = body.ring_impulse(p, H, false) {
+            if let ImpulseOutcome::Applied { step, root, .. } =
+                body.ring_impulse(p, H, false, &mut [])
+            {
                 if step < root {
                     limited += 1;
                     continue;
@@ -396,7 +435,7 @@ mod tests {
     fn tet_impulse_with_gamma_one_restores_the_tet_volume() {
         let mut body = shaken_body(1.0);
         for t in 0..body.mesh.tet_count() {
-            if let ImpulseOutcome::Applied { .. } = body.tet_impulse(t, H, 1.0, false) {
+            if let ImpulseOutcome::Applied { .. } = body.tet_impulse(t, H, 1.0, false, &mut []) {
                 // gamma = 1 applies the whole root.
                 let v0 = body.mesh.rest_volumes()[t];
                 let v = previewed_volume(&body, t);
@@ -413,7 +452,9 @@ mod tests {
         let mut below_at_start = 0;
         for p in 0..body.positions.len() {
             let before: Vec<f32> = (0..tets).map(|t| previewed_volume(&body, t)).collect();
-            if let ImpulseOutcome::Applied { clamped: c, .. } = body.ring_impulse(p, H, true) {
+            if let ImpulseOutcome::Applied { clamped: c, .. } =
+                body.ring_impulse(p, H, true, &mut [])
+            {
                 clamped += c as usize;
             }
             for t in 0..tets {
@@ -428,9 +469,10 @@ mod tests {
                     );
                 } else {
                     below_at_start += 1;
+                    let slack = CLAMP_SLACK * body.mesh.rest_volumes()[t];
                     assert!(
-                        after >= before[t] - tolerance,
-                        "ring {p}, tet {t} got worse: {} -> {after}",
+                        after >= before[t] - slack - tolerance,
+                        "ring {p}, tet {t} lost more than the slack: {} -> {after}",
                         before[t]
                     );
                 }
@@ -438,7 +480,7 @@ mod tests {
         }
         for t in 0..tets {
             let before: Vec<f32> = (0..tets).map(|u| previewed_volume(&body, u)).collect();
-            body.tet_impulse(t, H, 0.125, true);
+            body.tet_impulse(t, H, 0.125, true, &mut []);
             for u in 0..tets {
                 let eps = CLAMP_FRACTION * body.mesh.rest_volumes()[u];
                 let after = previewed_volume(&body, u);
@@ -450,9 +492,10 @@ mod tests {
                         before[u]
                     );
                 } else {
+                    let slack = CLAMP_SLACK * body.mesh.rest_volumes()[u];
                     assert!(
-                        after >= before[u] - tolerance,
-                        "tet {t}, neighbour {u} got worse"
+                        after >= before[u] - slack - tolerance,
+                        "tet {t}, neighbour {u} lost more than the slack"
                     );
                 }
             }
@@ -468,10 +511,10 @@ mod tests {
         let v_before = body.velocities[0];
         body.set_kinematic(0, body.positions[0]).unwrap();
         for p in 0..body.positions.len() {
-            body.ring_impulse(p, H, true);
+            body.ring_impulse(p, H, true, &mut []);
         }
         for t in 0..body.mesh.tet_count() {
-            body.tet_impulse(t, H, 0.125, true);
+            body.tet_impulse(t, H, 0.125, true, &mut []);
         }
         assert_eq!(body.velocities[0], v_before);
     }
