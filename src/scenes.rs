@@ -165,8 +165,8 @@ impl PaperScene {
                 lift: 0.0,
                 sphere: Some(SceneSphere {
                     radius: 0.35,
-                    mass: 1200.0,
-                    speed: 1.0,
+                    mass: 800.0,
+                    speed: 0.5,
                     gap: 0.2,
                     remove_after: Some(3.0),
                 }),
