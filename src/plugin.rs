@@ -127,16 +127,16 @@ fn scaled_mesh(mesh: &TetMesh, scale: Vec3) -> Result<TetMesh, crate::core::TetM
     )
 }
 
-fn prepare(
-    mut bodies: Query<(
-        Entity,
-        &mut SoftBody,
-        &mut Transform,
-        Option<&PinnedParticles>,
-        Option<&mut DrivenParticles>,
-    )>,
-    targets: Query<&Transform, Without<SoftBody>>,
-) {
+/// A body with its transform and its optional pinned and driven particles.
+type PreparedBody<'a> = (
+    Entity,
+    &'a mut SoftBody,
+    &'a mut Transform,
+    Option<&'a PinnedParticles>,
+    Option<&'a mut DrivenParticles>,
+);
+
+fn prepare(mut bodies: Query<PreparedBody>, targets: Query<&Transform, Without<SoftBody>>) {
     for (entity, mut body, mut transform, pinned, driven) in &mut bodies {
         let body = &mut *body;
         if !body.placed {

@@ -302,7 +302,6 @@ impl SoftBodyState {
     pub fn apply_forces(&mut self, h: f32, gravity: Vec3) {
         let forces = &mut self.scratch;
         let x = &self.positions;
-        let v = &self.velocities;
         let k_d = self.material.distance_stiffness;
         let damping = self.material.damping;
         for (e, &[i, j]) in self.mesh.edges().iter().enumerate() {
@@ -314,9 +313,7 @@ impl SoftBodyState {
             }
             let dir = delta / length;
             let rest = self.spring_rest[e];
-            let magnitude =
-                k_d * (length - rest) / (rest * rest) + damping * (v[j] - v[i]).dot(dir);
-            let f = dir * magnitude;
+            let f = dir * (k_d * (length - rest) / (rest * rest));
             forces[i] += f;
             forces[j] -= f;
         }
@@ -342,9 +339,40 @@ impl SoftBodyState {
             }
             *f = Vec3::ZERO;
         }
+        if damping > 0.0 {
+            self.damp_springs(h, damping);
+        }
         for &(i, target) in &self.kinematic {
             let i = i as usize;
             self.velocities[i] = (target - self.positions[i]) / h;
+        }
+    }
+
+    /// Spring damping, solved implicitly one spring at a time: the damper of each spring
+    /// removes the fraction `c h (w_i + w_j) / (1 + c h (w_i + w_j))` of the relative velocity
+    /// along it, which is the exact implicit step of that damper alone. An explicit damping
+    /// force overshoots on light particles (a grid corner weighs 1/40 of an interior particle)
+    /// as soon as the damping is strong enough to matter; this cannot, and it conserves
+    /// momentum.
+    fn damp_springs(&mut self, h: f32, damping: f32) {
+        let x = &self.positions;
+        for &[i, j] in self.mesh.edges() {
+            let (i, j) = (i as usize, j as usize);
+            let w_sum = self.inv_masses[i] + self.inv_masses[j];
+            if w_sum == 0.0 {
+                continue;
+            }
+            let delta = x[j] - x[i];
+            let length = delta.length();
+            if length <= f32::EPSILON {
+                continue;
+            }
+            let dir = delta / length;
+            let relative = (self.velocities[j] - self.velocities[i]).dot(dir);
+            let k = damping * h;
+            let impulse = relative * k / (1.0 + k * w_sum);
+            self.velocities[i] += dir * (impulse * self.inv_masses[i]);
+            self.velocities[j] -= dir * (impulse * self.inv_masses[j]);
         }
     }
 

@@ -457,23 +457,23 @@ mod tests {
             {
                 clamped += c as usize;
             }
-            for t in 0..tets {
+            for (t, &before_t) in before.iter().enumerate() {
                 let eps = CLAMP_FRACTION * body.mesh.rest_volumes()[t];
                 let after = previewed_volume(&body, t);
                 let tolerance = 1e-4 * body.mesh.rest_volumes()[t];
-                if before[t] >= eps {
+                if before_t >= eps {
                     assert!(
                         after >= eps - tolerance,
                         "ring {p}, tet {t}: {} -> {after} (eps {eps})",
-                        before[t]
+                        before_t
                     );
                 } else {
                     below_at_start += 1;
                     let slack = CLAMP_SLACK * body.mesh.rest_volumes()[t];
                     assert!(
-                        after >= before[t] - slack - tolerance,
+                        after >= before_t - slack - tolerance,
                         "ring {p}, tet {t} lost more than the slack: {} -> {after}",
-                        before[t]
+                        before_t
                     );
                 }
             }
@@ -481,20 +481,20 @@ mod tests {
         for t in 0..tets {
             let before: Vec<f32> = (0..tets).map(|u| previewed_volume(&body, u)).collect();
             body.tet_impulse(t, H, 0.125, true, &mut []);
-            for u in 0..tets {
+            for (u, &before_u) in before.iter().enumerate() {
                 let eps = CLAMP_FRACTION * body.mesh.rest_volumes()[u];
                 let after = previewed_volume(&body, u);
                 let tolerance = 1e-4 * body.mesh.rest_volumes()[u];
-                if before[u] >= eps {
+                if before_u >= eps {
                     assert!(
                         after >= eps - tolerance,
                         "tet {t}, neighbour {u}: {} -> {after}",
-                        before[u]
+                        before_u
                     );
                 } else {
                     let slack = CLAMP_SLACK * body.mesh.rest_volumes()[u];
                     assert!(
-                        after >= before[u] - slack - tolerance,
+                        after >= before_u - slack - tolerance,
                         "tet {t}, neighbour {u} lost more than the slack"
                     );
                 }

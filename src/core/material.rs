@@ -87,7 +87,8 @@ pub struct SoftBodyMaterial {
     pub density: f32,
     /// `k_D`, the spring stiffness of `E_D = 1/2 k_D ((L - D0) / D0)^2` on every edge.
     pub distance_stiffness: f32,
-    /// Damping along each spring, in force per unit of relative velocity.
+    /// Damping along each spring, in force per unit of relative velocity (N s/m), applied
+    /// implicitly so that any value is stable.
     pub damping: f32,
     /// Coulomb friction coefficient against colliders and spheres.
     pub friction: f32,

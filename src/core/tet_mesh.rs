@@ -172,7 +172,12 @@ impl TetMesh {
                 .flat_map(|a| (a + 1..4).map(move |b| (a, b)))
                 .map(|(a, b)| p[a].distance(p[b]))
                 .fold(0.0f32, f32::max);
-            if !(volume.abs() > DEGENERATE_RATIO * longest_edge.powi(3)) {
+            // Written so that a NaN volume (impossible for finite input) also counts as degenerate.
+            if volume
+                .abs()
+                .partial_cmp(&(DEGENERATE_RATIO * longest_edge.powi(3)))
+                != Some(std::cmp::Ordering::Greater)
+            {
                 return Err(TetMeshError::DegenerateTet {
                     tet: t,
                     volume,
@@ -230,8 +235,7 @@ impl TetMesh {
                     }
                 }
             }
-            for k in start..ring_pairs.len() {
-                let i = ring_pairs[k].1;
+            for &(_, i) in &ring_pairs[start..] {
                 for &t in one_rings.row(i as usize) {
                     if stamp_t[t as usize] != key {
                         stamp_t[t as usize] = key;
