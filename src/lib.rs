@@ -5,6 +5,23 @@
 //! [`SoftBodyMaterial`](core::SoftBodyMaterial), add a ground ([`StaticCollider::ground`]) and
 //! perhaps a few [`RigidSphere`]s. The simulation core in [`core`] has no ECS types and can be
 //! used on its own.
+//!
+//! ```
+//! use bevy_soft_body::core::{SoftBodyMaterial, SoftBodyState, VolumeMethod, box_grid};
+//! use glam::{UVec3, Vec3};
+//!
+//! // A 4x4x4-cell cube, squeezed from two sides, keeps its volume with the paper's method.
+//! let mesh = box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO).unwrap();
+//! let material = SoftBodyMaterial { method: VolumeMethod::PAPER_IMPULSES, ..Default::default() };
+//! let mut body = SoftBodyState::new(mesh.into(), material).unwrap();
+//! for (p, v) in body.positions().to_vec().iter().zip(body.velocities_mut()) {
+//!     v.x = if p.x < 0.2 { 1.0 } else { -1.0 };
+//! }
+//! for _ in 0..20 {
+//!     body.step_free(0.01, Vec3::ZERO);
+//! }
+//! assert!(body.volume_metrics().volume_error_pct.abs() < 1.0);
+//! ```
 #![warn(missing_docs)]
 
 pub mod components;
