@@ -174,16 +174,7 @@ impl SoftBodyState {
         let limited = root.min(RING_STEP_LIMIT * tet_step);
         let mut step = limited;
         if clamp {
-            let max_move = vertices
-                .iter()
-                .map(|&i| self.scratch[i as usize].length())
-                .fold(0.0f32, f32::max);
-            step = self.neighbour_clamp(
-                ring.iter().chain(mesh.ring_border_tets(p)),
-                step,
-                max_move,
-                h,
-            );
+            step = self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step, h);
         }
         let clamped = step < limited;
         self.counters.rings_corrected += 1;
@@ -239,11 +230,9 @@ impl SoftBodyState {
             for k in 0..4 {
                 self.scratch[tet[k] as usize] = d[k];
             }
-            let max_move = d.iter().map(|x| x.length()).fold(0.0f32, f32::max);
             step = self.neighbour_clamp(
                 std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
                 step,
-                max_move,
                 h,
             );
             for &i in &tet {
@@ -275,18 +264,26 @@ impl SoftBodyState {
     /// The neighbour clamp: the largest `s' <= step` such that every tet in `tets` keeps at
     /// least `eps = V0 / 2` (or, if it is already below, its current volume less
     /// [`CLAMP_SLACK`] of its rest volume) for every step in
-    /// `[0, s']` along the directions in `scratch`. `max_move` is the longest direction, used
-    /// to skip tets that cannot come near their floor without solving their cubic.
+    /// `[0, s']` along the directions in `scratch`. A bound on each tet's volume change from
+    /// its own longest direction skips tets that cannot come near their floor without solving
+    /// their cubic.
     fn neighbour_clamp<'a>(
         &self,
         tets: impl Iterator<Item = &'a u32>,
         mut step: f64,
-        max_move: f32,
         h: f32,
     ) -> f64 {
         let mesh = &self.mesh;
         for &t in tets {
             let tet = mesh.tets()[t as usize];
+            let max_move = tet
+                .iter()
+                .map(|&i| self.scratch[i as usize].length_squared())
+                .fold(0.0f32, f32::max)
+                .sqrt();
+            if max_move == 0.0 {
+                continue;
+            }
             let xp = tet.map(|i| self.preview(i, h));
             let v0 = mesh.rest_volumes()[t as usize];
             let volume = signed_volume(&xp);

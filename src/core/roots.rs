@@ -85,7 +85,8 @@ pub fn monotone_root(c: &Cubic) -> Option<f64> {
         return Some(turn);
     }
     if p0 * pt < 0.0 {
-        return Some(bracketed_root(&c, 0.0, turn, p0));
+        // Newton's first step from 0, the linearised root, is usually almost the root.
+        return Some(bracketed_root(&c, 0.0, turn, p0, -c[0] / c[1]));
     }
     None
 }
@@ -143,7 +144,7 @@ fn first_root(c: &Cubic, hi: f64, touching: Touching) -> Option<f64> {
                 return Some(if pa == 0.0 {
                     a
                 } else {
-                    bracketed_root(&c, a, b, pa)
+                    bracketed_root(&c, a, b, pa, a - pa * (b - a) / (pb - pa))
                 });
             }
             last_sign = sb;
@@ -187,11 +188,16 @@ fn derivative_roots(c: &Cubic, degree: usize) -> (Option<f64>, Option<f64>) {
     }
 }
 
-/// Root of `c` in `[a, b]` where `c(a)` and `c(b)` have opposite signs: Newton steps kept inside
-/// the bracket, bisection when Newton leaves it. The polynomial is monotone on `[a, b]`.
-fn bracketed_root(c: &Cubic, mut a: f64, mut b: f64, pa: f64) -> f64 {
+/// Root of `c` in `[a, b]` where `c(a)` and `c(b)` have opposite signs, starting at `guess`:
+/// Newton steps kept inside the bracket, bisection when Newton leaves it. The polynomial is
+/// monotone on `[a, b]`.
+fn bracketed_root(c: &Cubic, mut a: f64, mut b: f64, pa: f64, guess: f64) -> f64 {
     let rising = pa < 0.0;
-    let mut x = 0.5 * (a + b);
+    let mut x = if guess > a && guess < b {
+        guess
+    } else {
+        0.5 * (a + b)
+    };
     for _ in 0..200 {
         let px = eval(c, x);
         if px == 0.0 {
@@ -207,11 +213,17 @@ fn bracketed_root(c: &Cubic, mut a: f64, mut b: f64, pa: f64) -> f64 {
         }
         let dx = eval_derivative(c, x);
         let newton = if dx != 0.0 { x - px / dx } else { f64::NAN };
-        x = if newton > a && newton < b {
-            newton
+        if newton > a && newton < b {
+            // Newton usually closes in from one side, so the bracket alone would not shrink:
+            // stop once its step is at the limit of f64 precision.
+            let converged = (newton - x).abs() <= 4.0 * f64::EPSILON * x.abs();
+            x = newton;
+            if converged {
+                break;
+            }
         } else {
-            0.5 * (a + b)
-        };
+            x = 0.5 * (a + b);
+        }
     }
     x
 }
