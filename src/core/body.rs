@@ -89,6 +89,9 @@ pub struct SoftBodyState {
     pub(crate) scratch: Vec<Vec3>,
     /// Per particle, the outward unit normal of what it touches this step (zero if nothing).
     pub(crate) contact_normals: Vec<Vec3>,
+    /// Previewed positions `x + h v` during the volume passes, kept in step with every velocity
+    /// change there (`apply_velocity_change`), so the passes read one array, not two.
+    pub(crate) previews: Vec<Vec3>,
     /// Per particle in contact, the share `f` of a push into the contact that the particle keeps:
     /// 0 against a static collider, `w_s / (w_p + w_s)` against a sphere.
     pub(crate) contact_kept: Vec<f32>,
@@ -122,6 +125,7 @@ impl SoftBodyState {
             material,
             scratch: vec![Vec3::ZERO; n],
             contact_normals: vec![Vec3::ZERO; n],
+            previews: vec![Vec3::ZERO; n],
             contact_kept: vec![0.0; n],
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::new(),
@@ -283,9 +287,11 @@ impl SoftBodyState {
         &mut self,
         i: usize,
         dv: Vec3,
+        h: f32,
         spheres: &mut [RigidSphereState],
     ) {
         self.velocities[i] += dv;
+        self.previews[i] += h * dv;
         let k = self.contact_sphere[i];
         if k != u32::MAX
             && let Some(sphere) = spheres.get_mut(k as usize)
@@ -408,10 +414,23 @@ impl SoftBodyState {
         }
     }
 
-    /// Previewed position of particle `i`: where it ends the step with its current velocity.
+    /// Previewed position of particle `i` (valid after `refresh_previews`, during the volume
+    /// passes): where it ends the step with its current velocity.
     #[inline]
-    pub(crate) fn preview(&self, i: u32, h: f32) -> Vec3 {
-        self.positions[i as usize] + h * self.velocities[i as usize]
+    pub(crate) fn preview(&self, i: u32) -> Vec3 {
+        self.previews[i as usize]
+    }
+
+    /// Sets every previewed position to `x + h v`.
+    pub(crate) fn refresh_previews(&mut self, h: f32) {
+        for ((xp, x), v) in self
+            .previews
+            .iter_mut()
+            .zip(&self.positions)
+            .zip(&self.velocities)
+        {
+            *xp = *x + h * *v;
+        }
     }
 
     /// Volume error, mean per-tet error and inverted tets of the current positions.

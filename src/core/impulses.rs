@@ -84,6 +84,7 @@ impl SoftBodyState {
         if !settings.one_ring {
             return;
         }
+        self.refresh_previews(h);
         for p in 0..self.positions.len() {
             self.ring_impulse(p, h, settings.neighbour_clamp, spheres);
         }
@@ -99,6 +100,7 @@ impl SoftBodyState {
         if !settings.per_tet || settings.gamma == 0.0 {
             return;
         }
+        self.refresh_previews(h);
         for t in 0..self.mesh.tet_count() {
             self.tet_impulse(
                 t,
@@ -112,8 +114,8 @@ impl SoftBodyState {
 
     /// The one-ring impulse of vertex `p`: every particle of the ring moves by `s * D_i`, where
     /// `D_i` sums the directions of the ring's tets that contain it, and `s` is the smallest
-    /// positive root of `sum_t V_t(s) = sum_t V0_t`.
-    pub fn ring_impulse(
+    /// positive root of `sum_t V_t(s) = sum_t V0_t`. Needs `refresh_previews` first.
+    pub(crate) fn ring_impulse(
         &mut self,
         p: usize,
         h: f32,
@@ -128,7 +130,7 @@ impl SoftBodyState {
         let mut tet_step = f64::INFINITY;
         for &t in ring {
             let tet = mesh.tets()[t as usize];
-            let xp = tet.map(|i| self.preview(i, h));
+            let xp = tet.map(|i| self.preview(i));
             let v0 = mesh.rest_volumes()[t as usize];
             rest += v0 as f64;
             let c = signed_volume(&xp) - v0;
@@ -161,7 +163,7 @@ impl SoftBodyState {
         }
         let mut poly: Cubic = [-rest, 0.0, 0.0, 0.0];
         for &t in ring {
-            let c = self.moved_volume(mesh.tets()[t as usize], h);
+            let c = self.moved_volume(mesh.tets()[t as usize]);
             for k in 0..4 {
                 poly[k] += c[k];
             }
@@ -174,7 +176,7 @@ impl SoftBodyState {
         let limited = root.min(RING_STEP_LIMIT * tet_step);
         let mut step = limited;
         if clamp {
-            step = self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step, h);
+            step = self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step);
         }
         let clamped = step < limited;
         self.counters.rings_corrected += 1;
@@ -182,7 +184,7 @@ impl SoftBodyState {
         let scale = (step / h as f64) as f32;
         for &i in vertices {
             let i = i as usize;
-            self.apply_velocity_change(i, scale * self.scratch[i], spheres);
+            self.apply_velocity_change(i, scale * self.scratch[i], h, spheres);
             self.scratch[i] = Vec3::ZERO;
         }
         ImpulseOutcome::Applied {
@@ -193,8 +195,8 @@ impl SoftBodyState {
     }
 
     /// The per-tet impulse of tet `t`: its four particles move by `gamma * s * d_i`, `s` being the
-    /// smallest positive root of `V_t(s) = V0_t`.
-    pub fn tet_impulse(
+    /// smallest positive root of `V_t(s) = V0_t`. Needs `refresh_previews` first.
+    pub(crate) fn tet_impulse(
         &mut self,
         t: usize,
         h: f32,
@@ -205,7 +207,7 @@ impl SoftBodyState {
         let mesh = self.mesh.clone();
         let tet = mesh.tets()[t];
         let v0 = mesh.rest_volumes()[t];
-        let xp = tet.map(|i| self.preview(i, h));
+        let xp = tet.map(|i| self.preview(i));
         let c = signed_volume(&xp) - v0;
         if c == 0.0 {
             return ImpulseOutcome::Skipped;
@@ -233,7 +235,6 @@ impl SoftBodyState {
             step = self.neighbour_clamp(
                 std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
                 step,
-                h,
             );
             for &i in &tet {
                 self.scratch[i as usize] = Vec3::ZERO;
@@ -243,7 +244,7 @@ impl SoftBodyState {
         self.counters.tets_clamped += clamped as u32;
         let scale = (step / h as f64) as f32;
         for k in 0..4 {
-            self.apply_velocity_change(tet[k] as usize, scale * d[k], spheres);
+            self.apply_velocity_change(tet[k] as usize, scale * d[k], h, spheres);
         }
         ImpulseOutcome::Applied {
             step,
@@ -255,8 +256,8 @@ impl SoftBodyState {
     /// Volume polynomial of `tet` when its particles move from their previewed positions along
     /// the directions held in `scratch` (zero for particles that do not move).
     #[inline]
-    fn moved_volume(&self, tet: [u32; 4], h: f32) -> Cubic {
-        let xp = tet.map(|i| self.preview(i, h));
+    fn moved_volume(&self, tet: [u32; 4]) -> Cubic {
+        let xp = tet.map(|i| self.preview(i));
         let d = tet.map(|i| self.scratch[i as usize]);
         volume_polynomial(&xp, &d)
     }
@@ -267,12 +268,7 @@ impl SoftBodyState {
     /// `[0, s']` along the directions in `scratch`. A bound on each tet's volume change from
     /// its own longest direction skips tets that cannot come near their floor without solving
     /// their cubic.
-    fn neighbour_clamp<'a>(
-        &self,
-        tets: impl Iterator<Item = &'a u32>,
-        mut step: f64,
-        h: f32,
-    ) -> f64 {
+    fn neighbour_clamp<'a>(&self, tets: impl Iterator<Item = &'a u32>, mut step: f64) -> f64 {
         let mesh = &self.mesh;
         for &t in tets {
             let tet = mesh.tets()[t as usize];
@@ -284,7 +280,7 @@ impl SoftBodyState {
             if max_move == 0.0 {
                 continue;
             }
-            let xp = tet.map(|i| self.preview(i, h));
+            let xp = tet.map(|i| self.preview(i));
             let v0 = mesh.rest_volumes()[t as usize];
             let volume = signed_volume(&xp);
             let eps = CLAMP_FRACTION * v0;
@@ -305,7 +301,7 @@ impl SoftBodyState {
             if volume - bound > floor {
                 continue;
             }
-            let mut c = self.moved_volume(tet, h);
+            let mut c = self.moved_volume(tet);
             if c[1] == 0.0 && c[2] == 0.0 && c[3] == 0.0 {
                 continue;
             }
@@ -359,11 +355,12 @@ mod tests {
             };
             *v = Vec3::new(next(), next(), next()) * strength;
         }
+        body.refresh_previews(H);
         body
     }
 
     fn previewed_volume(body: &SoftBodyState, t: usize) -> f32 {
-        signed_volume(&body.mesh.tets()[t].map(|i| body.preview(i, H)))
+        signed_volume(&body.mesh.tets()[t].map(|i| body.preview(i)))
     }
 
     #[test]
@@ -507,6 +504,7 @@ mod tests {
         let mut body = shaken_body(3.0);
         let v_before = body.velocities[0];
         body.set_kinematic(0, body.positions[0]).unwrap();
+        body.refresh_previews(H);
         for p in 0..body.positions.len() {
             body.ring_impulse(p, H, true, &mut []);
         }
