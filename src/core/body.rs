@@ -492,3 +492,72 @@ impl SoftBodyState {
         self.integrate_positions(h);
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use glam::Vec3;
+
+    use super::*;
+
+    fn single_tet(damping: f32) -> SoftBodyState {
+        let mesh = TetMesh::new(
+            vec![Vec3::X, Vec3::Y, Vec3::Z, Vec3::ZERO],
+            vec![[0, 1, 2, 3]],
+        )
+        .unwrap();
+        let material = SoftBodyMaterial {
+            distance_stiffness: 0.0,
+            damping,
+            method: VolumeMethod::Baseline {
+                volume_stiffness: 0.0,
+            },
+            ..Default::default()
+        };
+        SoftBodyState::new(Arc::new(mesh), material).unwrap()
+    }
+
+    #[test]
+    fn spring_damping_is_stable_for_any_value_and_conserves_momentum() {
+        for damping in [0.5, 50.0, 5e6] {
+            let mut body = single_tet(damping);
+            body.velocities_mut()[0] = Vec3::new(3.0, -1.0, 0.5);
+            body.velocities_mut()[3] = Vec3::new(-1.0, 0.0, 2.0);
+            let momentum = body.linear_momentum();
+            let mut last_energy = f32::INFINITY;
+            for _ in 0..50 {
+                body.apply_forces(0.01, Vec3::ZERO);
+                let energy: f32 = body
+                    .velocities()
+                    .iter()
+                    .zip(body.masses())
+                    .map(|(v, m)| 0.5 * m * v.length_squared())
+                    .sum();
+                // Damping only ever removes kinetic energy, whatever its size.
+                assert!(
+                    energy <= last_energy * (1.0 + 1e-5),
+                    "damping {damping}: {last_energy} -> {energy}"
+                );
+                last_energy = energy;
+                assert!(
+                    (body.linear_momentum() - momentum).length()
+                        < 1e-4 * momentum.length().max(1.0)
+                );
+            }
+            // With a damper far stiffer than the masses (c h w >> 1), the relative motion along
+            // the edges dies out; positions do not move here, so the edges keep their directions.
+            if damping >= 1e6 {
+                let v = body.velocities();
+                for &[i, j] in body.mesh().edges() {
+                    let (i, j) = (i as usize, j as usize);
+                    let dir = (body.positions()[j] - body.positions()[i]).normalize();
+                    assert!(
+                        (v[j] - v[i]).dot(dir).abs() < 1e-2,
+                        "damping {damping}: edge {i}-{j} still moving"
+                    );
+                }
+            }
+        }
+    }
+}
