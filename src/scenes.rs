@@ -66,6 +66,9 @@ pub struct SceneParams {
     pub gravity: f32,
     /// Height of the body's lowest point above the ground at spawn, m.
     pub lift: f32,
+    /// Downward speed of the body at spawn, m/s (the creature is thrown down: under a gravity
+    /// strong enough to give it that speed by falling, it slumps instead of standing).
+    pub speed: f32,
     /// The sphere, if the scene has one.
     pub sphere: Option<SceneSphere>,
     /// Simulated seconds.
@@ -119,6 +122,7 @@ impl PaperScene {
                 damping: 1.0,
                 gravity: 0.0,
                 lift: 0.0,
+                speed: 0.0,
                 sphere: None,
                 duration_secs: 8.0,
             },
@@ -127,6 +131,7 @@ impl PaperScene {
                 damping: 1.0,
                 gravity: 0.2,
                 lift: 1.0,
+                speed: 0.0,
                 sphere: Some(SceneSphere {
                     radius: 0.3,
                     mass: 250.0,
@@ -141,6 +146,7 @@ impl PaperScene {
                 damping: 4.0,
                 gravity: 0.02,
                 lift: 0.0,
+                speed: 0.0,
                 sphere: Some(SceneSphere {
                     radius: 0.4,
                     mass: 3000.0,
@@ -153,8 +159,9 @@ impl PaperScene {
             PaperScene::Creature => SceneParams {
                 density: 1000.0,
                 damping: 1.0,
-                gravity: 0.3,
+                gravity: 0.1,
                 lift: 0.5,
+                speed: 0.7,
                 sphere: None,
                 duration_secs: 8.0,
             },
@@ -163,6 +170,7 @@ impl PaperScene {
                 damping: 2.0,
                 gravity: 1.0,
                 lift: 0.0,
+                speed: 0.0,
                 sphere: Some(SceneSphere {
                     radius: 0.35,
                     mass: 800.0,
@@ -221,8 +229,11 @@ impl PaperScene {
         commands.insert_resource(SoftBodyGravity(self.gravity()));
         let params = self.params();
         let mesh = self.tet_mesh();
-        let body =
+        let mut body =
             SoftBody::new(mesh.clone(), self.material(method)).expect("scene materials are valid");
+        for v in body.state_mut().velocities_mut() {
+            v.y = -params.speed;
+        }
         let (lo, hi) = mesh.bounds();
         let size = hi - lo;
         let place = offset + Vec3::new(0.0, params.lift, 0.0);

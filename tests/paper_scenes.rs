@@ -144,7 +144,6 @@ fn creature_keeps_volume_and_stays_above_the_ground() {
 }
 
 #[test]
-#[ignore = "open (issue 2): the creature slumps under its weight and does not bounce"]
 fn creature_jumps_up_again() {
     let run = run_scene(PaperScene::Creature, PAPER, None);
     let (landing, lowest) =
