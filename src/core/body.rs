@@ -62,7 +62,7 @@ pub struct StepCounters {
     pub tets_without_root: u32,
     /// Tets whose per-tet impulse the neighbour clamp shortened.
     pub tets_clamped: u32,
-    /// Particles whose velocity was not finite and was reset to zero.
+    /// Particles whose new position would not have been finite: kept in place and stopped.
     pub non_finite_velocities: u32,
 }
 
@@ -401,16 +401,20 @@ impl SoftBodyState {
         }
     }
 
-    /// Stage 6: `x += h v`. A velocity that is not finite (only an unstable explicit baseline
-    /// can produce one) is reset to zero and counted, so that one bad particle cannot turn the
-    /// whole body, the spheres it touches and the game's transforms into NaN.
+    /// Stage 6: `x += h v`. A particle whose new position would not be finite (only an unstable
+    /// explicit baseline gets there) keeps its position, loses its velocity and is counted, so
+    /// that one bad particle cannot turn the body, the spheres it touches and the game's
+    /// transforms into NaN.
     pub fn integrate_positions(&mut self, h: f32) {
         for (x, v) in self.positions.iter_mut().zip(&mut self.velocities) {
-            if !v.is_finite() {
+            let next = *x + h * *v;
+            if next.is_finite() {
+                *x = next;
+            } else {
+                // The particle stays where it is (still finite) and stops.
                 *v = Vec3::ZERO;
                 self.counters.non_finite_velocities += 1;
             }
-            *x += h * *v;
         }
     }
 
@@ -516,6 +520,18 @@ mod tests {
             ..Default::default()
         };
         SoftBodyState::new(Arc::new(mesh), material).unwrap()
+    }
+
+    #[test]
+    fn a_non_finite_velocity_does_not_reach_the_positions() {
+        let mut body = single_tet(1.0);
+        body.velocities_mut()[1] = Vec3::new(f32::NAN, 0.0, 0.0);
+        body.velocities_mut()[2] = Vec3::splat(f32::MAX);
+        body.step_free(0.01, Vec3::new(0.0, -9.81, 0.0));
+        assert!(body.positions().iter().all(|p| p.is_finite()));
+        assert!(body.velocities().iter().all(|v| v.is_finite()));
+        assert!(body.counters().non_finite_velocities >= 1);
+        assert!(body.volume_metrics().volume.is_finite());
     }
 
     #[test]
