@@ -245,6 +245,10 @@ mod tests {
         fn range(&mut self, lo: f64, hi: f64) -> f64 {
             lo + (hi - lo) * self.next()
         }
+        /// A cubic with coefficients uniform in [-1, 1].
+        fn cubic(&mut self) -> Cubic {
+            [0; 4].map(|_| self.range(-1.0, 1.0))
+        }
     }
 
     fn from_roots(k: f64, r: [f64; 3]) -> Cubic {
@@ -303,12 +307,7 @@ mod tests {
         let mut rng = Lcg(7);
         let mut checked = 0;
         for _ in 0..4000 {
-            let c: Cubic = [
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            ];
+            let c = rng.cubic();
             let hi = 10.0;
             let expected = sampled_first_crossing(&c, hi, 20_000);
             let got = first_crossing(&c, hi);
@@ -427,12 +426,7 @@ mod tests {
         let mut rng = Lcg(5);
         let mut answered = 0;
         for _ in 0..4000 {
-            let c: Cubic = [
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-                rng.range(-1.0, 1.0),
-            ];
+            let c = rng.cubic();
             if let Some(r) = monotone_root(&c) {
                 let s = smallest_positive_root(&c, f64::INFINITY).unwrap();
                 assert!((r - s).abs() < 1e-9 * (1.0 + s), "{c:?}: {r} vs {s}");
