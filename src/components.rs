@@ -69,6 +69,9 @@ pub struct DrivenParticles {
     /// Offsets in the target's frame, captured on the first step.
     #[reflect(ignore)]
     pub(crate) offsets: Vec<Vec3>,
+    /// Whether a missing target has been reported (once, until it is back).
+    #[reflect(ignore)]
+    pub(crate) target_missing: bool,
 }
 
 impl DrivenParticles {
@@ -78,6 +81,7 @@ impl DrivenParticles {
             target,
             particles,
             offsets: Vec::new(),
+            target_missing: false,
         }
     }
 }
@@ -184,6 +188,59 @@ impl SoftBodyStats {
             0.0
         } else {
             self.total_step_ms / self.steps as f64
+        }
+    }
+}
+
+/// Something a game gave the plugin that it could not use. The plugin logs it as an error,
+/// writes it as this message so that a game can react, and goes on with the rest.
+#[derive(Message, Clone, Debug, PartialEq)]
+pub struct SoftBodyError {
+    /// The soft body concerned.
+    pub body: Entity,
+    /// What is wrong.
+    pub kind: SoftBodyErrorKind,
+}
+
+/// What a [`SoftBodyError`] is about.
+#[derive(Clone, Debug, PartialEq)]
+pub enum SoftBodyErrorKind {
+    /// A pinned or driven particle index is out of range; it is skipped.
+    ParticleOutOfRange {
+        /// The index given.
+        index: u32,
+        /// How many particles the body has.
+        count: usize,
+    },
+    /// `DrivenParticles::target` has no `Transform`; the particles are not driven.
+    MissingDriveTarget(Entity),
+    /// The spawn transform's scale could not be applied; the body keeps its size.
+    BadScale {
+        /// The scale given.
+        scale: Vec3,
+        /// Why it could not be used.
+        reason: String,
+    },
+}
+
+impl std::fmt::Display for SoftBodyError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.kind {
+            SoftBodyErrorKind::ParticleOutOfRange { index, count } => write!(
+                f,
+                "soft body {}: particle {index} does not exist (the body has {count}); skipped",
+                self.body
+            ),
+            SoftBodyErrorKind::MissingDriveTarget(target) => write!(
+                f,
+                "soft body {}: driven particles follow {target}, which has no Transform",
+                self.body
+            ),
+            SoftBodyErrorKind::BadScale { scale, reason } => write!(
+                f,
+                "soft body {}: cannot apply the scale {scale}: {reason}; the body keeps its size",
+                self.body
+            ),
         }
     }
 }

@@ -30,16 +30,16 @@ pub mod plugin;
 pub mod scenes;
 
 pub use components::{
-    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, SoftBodyStats,
-    StaticCollider,
+    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
+    SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
 pub use plugin::{SoftBodyPlugin, SoftBodySet};
 
 /// Everything a game usually needs.
 pub mod prelude {
     pub use crate::components::{
-        DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, SoftBodyStats,
-        StaticCollider,
+        DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
+        SoftBodyGravity, SoftBodyStats, StaticCollider,
     };
     pub use crate::core::{ImpulseSettings, Plasticity, SoftBodyMaterial, TetMesh, VolumeMethod};
     pub use crate::plugin::{SoftBodyPlugin, SoftBodySet};

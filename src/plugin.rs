@@ -9,8 +9,8 @@ use bevy::prelude::*;
 use parry3d::math::Pose;
 
 use crate::components::{
-    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, SoftBodyStats,
-    StaticCollider,
+    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
+    SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
 use crate::core::{ColliderInstance, RigidSphereState, SoftBodyState, TetMesh};
 
@@ -76,7 +76,8 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<PinnedParticles>()
             .register_type::<DrivenParticles>()
             .register_type::<RigidSphere>()
-            .init_resource::<SolverSpheres>();
+            .init_resource::<SolverSpheres>()
+            .add_message::<SoftBodyError>();
         if let Some(step) = self.time_step
             && self.schedule == FixedUpdate.intern()
         {
@@ -132,11 +133,21 @@ type PreparedBody<'a> = (
     Entity,
     &'a mut SoftBody,
     &'a mut Transform,
-    Option<&'a PinnedParticles>,
+    Option<Ref<'a, PinnedParticles>>,
     Option<&'a mut DrivenParticles>,
 );
 
-fn prepare(mut bodies: Query<PreparedBody>, targets: Query<&Transform, Without<SoftBody>>) {
+/// Logs `error` and writes it as a message.
+fn report(errors: &mut MessageWriter<SoftBodyError>, error: SoftBodyError) {
+    error!("{error}");
+    errors.write(error);
+}
+
+fn prepare(
+    mut bodies: Query<PreparedBody>,
+    targets: Query<&Transform, Without<SoftBody>>,
+    mut errors: MessageWriter<SoftBodyError>,
+) {
     for (entity, mut body, mut transform, pinned, driven) in &mut bodies {
         let body = &mut *body;
         if !body.placed {
@@ -149,9 +160,15 @@ fn prepare(mut bodies: Query<PreparedBody>, targets: Query<&Transform, Without<S
                             .map_err(|e| e.to_string())
                     }) {
                     Ok(state) => body.state = state,
-                    Err(e) => error!(
-                        "soft body {entity}: cannot apply the scale {}: {e}; the body keeps its size",
-                        placement.scale
+                    Err(reason) => report(
+                        &mut errors,
+                        SoftBodyError {
+                            body: entity,
+                            kind: SoftBodyErrorKind::BadScale {
+                                scale: placement.scale,
+                                reason,
+                            },
+                        },
                     ),
                 }
             }
@@ -163,51 +180,61 @@ fn prepare(mut bodies: Query<PreparedBody>, targets: Query<&Transform, Without<S
         body.step_time = Duration::ZERO;
         body.state.begin_step();
         body.state.clear_kinematic();
+        let count = body.state.positions().len();
+        let out_of_range = |index: u32| SoftBodyError {
+            body: entity,
+            kind: SoftBodyErrorKind::ParticleOutOfRange { index, count },
+        };
         if let Some(pinned) = pinned {
             for &i in &pinned.0 {
-                let target = body
-                    .state
-                    .positions()
-                    .get(i as usize)
-                    .copied()
-                    .unwrap_or_default();
-                if let Err(e) = body.state.set_kinematic(i as usize, target) {
-                    error!("soft body {entity}: pinned {e}");
+                match body.state.positions().get(i as usize).copied() {
+                    Some(here) => {
+                        let _ = body.state.set_kinematic(i as usize, here);
+                    }
+                    // Reported once, when the component is added or changed.
+                    None if pinned.is_changed() => report(&mut errors, out_of_range(i)),
+                    None => {}
                 }
             }
         }
         if let Some(mut driven) = driven {
             let Ok(target) = targets.get(driven.target) else {
-                error!(
-                    "soft body {entity}: driven particles follow {}, which has no Transform",
-                    driven.target
-                );
+                if !driven.target_missing {
+                    driven.target_missing = true;
+                    let target = driven.target;
+                    report(
+                        &mut errors,
+                        SoftBodyError {
+                            body: entity,
+                            kind: SoftBodyErrorKind::MissingDriveTarget(target),
+                        },
+                    );
+                }
                 continue;
             };
+            driven.target_missing = false;
             let to_world = target.to_matrix();
             if driven.offsets.len() != driven.particles.len() {
                 let to_local = to_world.inverse();
-                let offsets = driven
-                    .particles
-                    .iter()
-                    .map(|&i| {
-                        let p = body
-                            .state
-                            .positions()
-                            .get(i as usize)
-                            .copied()
-                            .unwrap_or_default();
-                        to_local.transform_point3(p)
-                    })
-                    .collect();
+                let mut offsets = Vec::with_capacity(driven.particles.len());
+                for &i in &driven.particles {
+                    match body.state.positions().get(i as usize) {
+                        Some(&p) => offsets.push(to_local.transform_point3(p)),
+                        None => {
+                            // Reported once, when the offsets are captured; kept as a
+                            // placeholder so that indices and offsets stay paired.
+                            report(&mut errors, out_of_range(i));
+                            offsets.push(Vec3::ZERO);
+                        }
+                    }
+                }
                 driven.offsets = offsets;
             }
             for (&i, &offset) in driven.particles.iter().zip(&driven.offsets) {
-                if let Err(e) = body
-                    .state
-                    .set_kinematic(i as usize, to_world.transform_point3(offset))
-                {
-                    error!("soft body {entity}: driven {e}");
+                if (i as usize) < count {
+                    let _ = body
+                        .state
+                        .set_kinematic(i as usize, to_world.transform_point3(offset));
                 }
             }
         }

@@ -146,6 +146,14 @@ fn bad_input_gives_errors_not_panics() {
     // Out-of-range pinned particles and a driven target that does not exist: logged, the game
     // goes on, and the valid indices still apply.
     let mut app = app(Vec3::new(0.0, -1.0, 0.0));
+    #[derive(Resource, Default)]
+    struct Seen(Vec<SoftBodyError>);
+    app.init_resource::<Seen>().add_systems(
+        Update,
+        |mut r: MessageReader<SoftBodyError>, mut seen: ResMut<Seen>| {
+            seen.0.extend(r.read().cloned());
+        },
+    );
     let missing = app.world_mut().spawn_empty().id();
     app.world_mut().despawn(missing);
     let body = app
@@ -174,5 +182,24 @@ fn bad_input_gives_errors_not_panics() {
     assert!(
         state.centre_of_mass().y < 0.1,
         "the rest of the body did not fall"
+    );
+    // Each problem is reported once, as a message a game can read, not once per step.
+    let seen = &app.world().resource::<Seen>().0;
+    let count = state.positions().len();
+    assert_eq!(
+        seen,
+        &vec![
+            SoftBodyError {
+                body,
+                kind: SoftBodyErrorKind::ParticleOutOfRange {
+                    index: 10_000,
+                    count
+                }
+            },
+            SoftBodyError {
+                body,
+                kind: SoftBodyErrorKind::MissingDriveTarget(missing)
+            },
+        ]
     );
 }
