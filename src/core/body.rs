@@ -62,6 +62,9 @@ pub struct StepCounters {
     pub tets_without_root: u32,
     /// Tets whose per-tet impulse the neighbour clamp shortened.
     pub tets_clamped: u32,
+    /// Impulses whose neighbour clamp was known to be moot from the pass's bounds, so its walk
+    /// over the neighbours was skipped.
+    pub clamps_skipped: u32,
     /// Particles whose new position would not have been finite: kept in place and stopped.
     pub non_finite_velocities: u32,
 }
@@ -92,6 +95,8 @@ pub struct SoftBodyState {
     /// Previewed positions `x + h v` during the volume passes, kept in step with every velocity
     /// change there (`apply_velocity_change`), so the passes read one array, not two.
     pub(crate) previews: Vec<Vec3>,
+    /// Bounds that let most impulses skip the neighbour clamp (see `impulses.rs`).
+    pub(crate) clamp_bounds: super::impulses::ClampBounds,
     /// Per particle in contact, the share `f` of a push into the contact that the particle keeps:
     /// 0 against a static collider, `w_s / (w_p + w_s)` against a sphere.
     pub(crate) contact_kept: Vec<f32>,
@@ -126,6 +131,7 @@ impl SoftBodyState {
             scratch: vec![Vec3::ZERO; n],
             contact_normals: vec![Vec3::ZERO; n],
             previews: vec![Vec3::ZERO; n],
+            clamp_bounds: Default::default(),
             contact_kept: vec![0.0; n],
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::new(),
@@ -292,6 +298,11 @@ impl SoftBodyState {
     ) {
         self.velocities[i] += dv;
         self.previews[i] += h * dv;
+        if self.clamp_bounds.active {
+            let moved = &mut self.clamp_bounds.moved[i];
+            *moved += h * dv.length();
+            self.clamp_bounds.max_moved = self.clamp_bounds.max_moved.max(*moved);
+        }
         let k = self.contact_sphere[i];
         if k != u32::MAX
             && let Some(sphere) = spheres.get_mut(k as usize)

@@ -53,6 +53,47 @@ pub enum ImpulseOutcome {
     },
 }
 
+/// Bounds computed at the start of a volume pass that let most impulses skip the neighbour
+/// clamp without looking at their neighbours.
+///
+/// Every tet's volume can change from its value at the start of the pass only through the
+/// motion of its vertices; if each edge vector moves by at most `delta`, the volume moves by at
+/// most `volume_bound(delta, L)` with `L` the tet's longest edge from its last vertex. `moved`
+/// holds how far each particle's preview has moved in this pass and `max_moved` the largest of
+/// them. An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its
+/// floor when `volume_bound(2 (max_moved + m), region_reach)` is below `region_slack`, the
+/// smallest slack above the floor in the region at the start of the pass; then the clamp's answer
+/// is known (no shortening) and its walk over the neighbours is skipped. A tet already below
+/// `eps` at the start gets half of `CLAMP_SLACK` as slack here, because the drift before an
+/// impulse and the impulse itself each count once.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ClampBounds {
+    /// Whether the bounds describe the current pass.
+    pub(crate) active: bool,
+    tet_slack: Vec<f32>,
+    tet_reach: Vec<f32>,
+    region_slack: Vec<f32>,
+    region_reach: Vec<f32>,
+    pub(crate) moved: Vec<f32>,
+    pub(crate) max_moved: f32,
+}
+
+/// Largest change of a tet's volume when each of its edge vectors (from its last vertex, of
+/// length at most `l`) changes by at most `delta`.
+#[inline]
+fn volume_bound(delta: f32, l: f32) -> f32 {
+    (3.0 * delta * l * l + 3.0 * delta * delta * l + delta * delta * delta) / 6.0
+}
+
+/// Which clamp regions a pass uses.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum ClampRegions {
+    /// One region per vertex: its one-ring and the tets bordering it.
+    Rings,
+    /// One region per tet: itself and the tets sharing a vertex with it.
+    Tets,
+}
+
 /// A ring's step is at most this multiple of the smallest per-tet step of its tets, the step
 /// `1 / sum_i w_i |grad_i|^2` at which a tet's own direction corrects that tet to first order.
 ///
@@ -85,9 +126,13 @@ impl SoftBodyState {
             return;
         }
         self.refresh_previews(h);
+        if settings.neighbour_clamp {
+            self.prepare_clamp_bounds(ClampRegions::Rings);
+        }
         for p in 0..self.positions.len() {
             self.ring_impulse(p, h, settings.neighbour_clamp, spheres);
         }
+        self.clamp_bounds.active = false;
     }
 
     /// Stage 4: one impulse per tet towards its own rest volume, scaled by `gamma` (section 4,
@@ -101,6 +146,9 @@ impl SoftBodyState {
             return;
         }
         self.refresh_previews(h);
+        if settings.neighbour_clamp {
+            self.prepare_clamp_bounds(ClampRegions::Tets);
+        }
         for t in 0..self.mesh.tet_count() {
             self.tet_impulse(
                 t,
@@ -110,6 +158,7 @@ impl SoftBodyState {
                 spheres,
             );
         }
+        self.clamp_bounds.active = false;
     }
 
     /// The one-ring impulse of vertex `p`: every particle of the ring moves by `s * D_i`, where
@@ -176,7 +225,16 @@ impl SoftBodyState {
         let limited = root.min(RING_STEP_LIMIT * tet_step);
         let mut step = limited;
         if clamp {
-            step = self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step);
+            let largest = vertices
+                .iter()
+                .map(|&i| self.scratch[i as usize].length_squared())
+                .fold(0.0f32, f32::max);
+            let region = ring.iter().chain(mesh.ring_border_tets(p));
+            if !self.clamp_is_moot(p, region, step as f32 * largest.sqrt()) {
+                step = self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step);
+            } else {
+                self.counters.clamps_skipped += 1;
+            }
         }
         let clamped = step < limited;
         self.counters.rings_corrected += 1;
@@ -229,15 +287,22 @@ impl SoftBodyState {
         let full = gamma * root;
         let mut step = full;
         if clamp {
-            for k in 0..4 {
-                self.scratch[tet[k] as usize] = d[k];
-            }
-            step = self.neighbour_clamp(
-                std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
-                step,
-            );
-            for &i in &tet {
-                self.scratch[i as usize] = Vec3::ZERO;
+            let largest = d.iter().map(|x| x.length_squared()).fold(0.0f32, f32::max);
+            let own = t as u32;
+            let region = std::iter::once(&own).chain(mesh.tet_neighbours(t));
+            if !self.clamp_is_moot(t, region, step as f32 * largest.sqrt()) {
+                for k in 0..4 {
+                    self.scratch[tet[k] as usize] = d[k];
+                }
+                step = self.neighbour_clamp(
+                    std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
+                    step,
+                );
+                for &i in &tet {
+                    self.scratch[i as usize] = Vec3::ZERO;
+                }
+            } else {
+                self.counters.clamps_skipped += 1;
             }
         }
         let clamped = step < full;
@@ -260,6 +325,79 @@ impl SoftBodyState {
         let xp = tet.map(|i| self.preview(i));
         let d = tet.map(|i| self.scratch[i as usize]);
         volume_polynomial(&xp, &d)
+    }
+
+    /// Computes the [`ClampBounds`] of the coming pass from the current previews.
+    fn prepare_clamp_bounds(&mut self, regions: ClampRegions) {
+        let mesh = self.mesh.clone();
+        let b = &mut self.clamp_bounds;
+        b.tet_slack.resize(mesh.tet_count(), 0.0);
+        b.tet_reach.resize(mesh.tet_count(), 0.0);
+        for (t, (tet, &v0)) in mesh.tets().iter().zip(mesh.rest_volumes()).enumerate() {
+            let xp = tet.map(|i| self.previews[i as usize]);
+            let volume = signed_volume(&xp);
+            let eps = CLAMP_FRACTION * v0;
+            b.tet_slack[t] = if volume >= eps {
+                volume - eps
+            } else {
+                0.5 * CLAMP_SLACK * v0
+            };
+            b.tet_reach[t] = (xp[0] - xp[3])
+                .length()
+                .max((xp[1] - xp[3]).length())
+                .max((xp[2] - xp[3]).length());
+        }
+        let count = match regions {
+            ClampRegions::Rings => mesh.vertex_count(),
+            ClampRegions::Tets => mesh.tet_count(),
+        };
+        b.region_slack.resize(count, 0.0);
+        b.region_reach.resize(count, 0.0);
+        for r in 0..count {
+            let own = [r as u32];
+            let (first, rest): (&[u32], &[u32]) = match regions {
+                ClampRegions::Rings => (mesh.one_ring(r), mesh.ring_border_tets(r)),
+                ClampRegions::Tets => (&own, mesh.tet_neighbours(r)),
+            };
+            let (mut slack, mut reach) = (f32::INFINITY, 0.0f32);
+            for &t in first.iter().chain(rest) {
+                slack = slack.min(b.tet_slack[t as usize]);
+                reach = reach.max(b.tet_reach[t as usize]);
+            }
+            b.region_slack[r] = slack;
+            b.region_reach[r] = reach;
+        }
+        b.moved.clear();
+        b.moved.resize(mesh.vertex_count(), 0.0);
+        b.max_moved = 0.0;
+        b.active = true;
+    }
+
+    /// Whether an impulse whose largest particle move is `largest_move` certainly leaves every
+    /// tet of clamp region `region` (the tets `tets`) above its floor (see [`ClampBounds`]).
+    /// First with the largest drift of any particle in the pass, which costs nothing; if that
+    /// is not enough, with the largest drift among the region's own particles.
+    #[inline]
+    fn clamp_is_moot<'a>(
+        &self,
+        region: usize,
+        tets: impl Iterator<Item = &'a u32>,
+        largest_move: f32,
+    ) -> bool {
+        let b = &self.clamp_bounds;
+        if !b.active {
+            return false;
+        }
+        let (reach, slack) = (b.region_reach[region], b.region_slack[region]);
+        if volume_bound(2.0 * (b.max_moved + largest_move), reach) < slack {
+            return true;
+        }
+        let tet_list = self.mesh.tets();
+        let drift = tets
+            .flat_map(|&t| tet_list[t as usize])
+            .map(|i| b.moved[i as usize])
+            .fold(0.0f32, f32::max);
+        volume_bound(2.0 * (drift + largest_move), reach) < slack
     }
 
     /// The neighbour clamp: the largest `s' <= step` such that every tet in `tets` keeps at
@@ -296,8 +434,7 @@ impl SoftBodyState {
                 .length()
                 .max((xp[1] - xp[3]).length())
                 .max((xp[2] - xp[3]).length());
-            let bound =
-                (3.0 * delta * l * l + 3.0 * delta * delta * l + delta * delta * delta) / 6.0;
+            let bound = volume_bound(delta, l);
             if volume - bound > floor {
                 continue;
             }
@@ -497,6 +634,49 @@ mod tests {
         // The scenario must exercise the clamp, or this test proves nothing.
         assert!(clamped > 0, "no ring impulse was clamped");
         assert!(below_at_start > 0, "no tet started below its floor");
+    }
+
+    #[test]
+    fn passes_keep_every_tet_above_its_floor_with_the_fast_clamp() {
+        // Gentle enough that the pass bounds skip most clamps, strong enough that some do not.
+        for strength in [0.05, 0.5, 4.0] {
+            let mut body = shaken_body(strength);
+            body.begin_step();
+            let above = |body: &SoftBodyState| -> Vec<bool> {
+                (0..body.mesh.tet_count())
+                    .map(|t| {
+                        previewed_volume(body, t) >= CLAMP_FRACTION * body.mesh.rest_volumes()[t]
+                    })
+                    .collect()
+            };
+            let check = |body: &SoftBodyState, was_above: &[bool], pass: &str| {
+                for (t, &was) in was_above.iter().enumerate() {
+                    let v0 = body.mesh.rest_volumes()[t];
+                    let v = previewed_volume(body, t);
+                    assert!(
+                        !was || v >= CLAMP_FRACTION * v0 - 1e-4 * v0,
+                        "strength {strength}, {pass} pass: tet {t} fell to {v} below V0/2 = {}",
+                        CLAMP_FRACTION * v0
+                    );
+                }
+            };
+            let before = above(&body);
+            body.one_ring_pass(H, &mut []);
+            check(&body, &before, "ring");
+            let before = above(&body);
+            body.per_tet_pass(H, &mut []);
+            check(&body, &before, "per-tet");
+            let c = body.counters();
+            if strength < 0.1 {
+                assert!(c.clamps_skipped > 0, "the fast path was never taken: {c:?}");
+            }
+            if strength > 1.0 {
+                assert!(
+                    c.rings_clamped + c.tets_clamped > 0,
+                    "the slow path never clamped: {c:?}"
+                );
+            }
+        }
     }
 
     #[test]
