@@ -72,6 +72,8 @@ pub(crate) struct ClampBounds {
     pub(crate) active: bool,
     tet_slack: Vec<f32>,
     tet_reach: Vec<f32>,
+    vertex_slack: Vec<f32>,
+    vertex_reach: Vec<f32>,
     region_slack: Vec<f32>,
     region_reach: Vec<f32>,
     pub(crate) moved: Vec<f32>,
@@ -229,8 +231,7 @@ impl SoftBodyState {
                 .iter()
                 .map(|&i| self.scratch[i as usize].length_squared())
                 .fold(0.0f32, f32::max);
-            let region = ring.iter().chain(mesh.ring_border_tets(p));
-            if !self.clamp_is_moot(p, region, step as f32 * largest.sqrt()) {
+            if !self.clamp_is_moot(p, vertices, step as f32 * largest.sqrt()) {
                 step = self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step);
             } else {
                 self.counters.clamps_skipped += 1;
@@ -288,9 +289,7 @@ impl SoftBodyState {
         let mut step = full;
         if clamp {
             let largest = d.iter().map(|x| x.length_squared()).fold(0.0f32, f32::max);
-            let own = t as u32;
-            let region = std::iter::once(&own).chain(mesh.tet_neighbours(t));
-            if !self.clamp_is_moot(t, region, step as f32 * largest.sqrt()) {
+            if !self.clamp_is_moot(t, &tet, step as f32 * largest.sqrt()) {
                 for k in 0..4 {
                     self.scratch[tet[k] as usize] = d[k];
                 }
@@ -347,6 +346,20 @@ impl SoftBodyState {
                 .max((xp[1] - xp[3]).length())
                 .max((xp[2] - xp[3]).length());
         }
+        // A region is a union of one-rings: a ring's tets and border tets are the one-rings of
+        // its ring vertices, a tet and its neighbours the one-rings of its four vertices. So the
+        // region bounds are extremes over per-vertex extremes, which costs a few reads each.
+        b.vertex_slack.resize(mesh.vertex_count(), 0.0);
+        b.vertex_reach.resize(mesh.vertex_count(), 0.0);
+        for v in 0..mesh.vertex_count() {
+            let (mut slack, mut reach) = (f32::INFINITY, 0.0f32);
+            for &t in mesh.one_ring(v) {
+                slack = slack.min(b.tet_slack[t as usize]);
+                reach = reach.max(b.tet_reach[t as usize]);
+            }
+            b.vertex_slack[v] = slack;
+            b.vertex_reach[v] = reach;
+        }
         let count = match regions {
             ClampRegions::Rings => mesh.vertex_count(),
             ClampRegions::Tets => mesh.tet_count(),
@@ -354,15 +367,14 @@ impl SoftBodyState {
         b.region_slack.resize(count, 0.0);
         b.region_reach.resize(count, 0.0);
         for r in 0..count {
-            let own = [r as u32];
-            let (first, rest): (&[u32], &[u32]) = match regions {
-                ClampRegions::Rings => (mesh.one_ring(r), mesh.ring_border_tets(r)),
-                ClampRegions::Tets => (&own, mesh.tet_neighbours(r)),
+            let vertices: &[u32] = match regions {
+                ClampRegions::Rings => mesh.ring_vertices(r),
+                ClampRegions::Tets => &mesh.tets()[r],
             };
             let (mut slack, mut reach) = (f32::INFINITY, 0.0f32);
-            for &t in first.iter().chain(rest) {
-                slack = slack.min(b.tet_slack[t as usize]);
-                reach = reach.max(b.tet_reach[t as usize]);
+            for &v in vertices {
+                slack = slack.min(b.vertex_slack[v as usize]);
+                reach = reach.max(b.vertex_reach[v as usize]);
             }
             b.region_slack[r] = slack;
             b.region_reach[r] = reach;
@@ -374,16 +386,12 @@ impl SoftBodyState {
     }
 
     /// Whether an impulse whose largest particle move is `largest_move` certainly leaves every
-    /// tet of clamp region `region` (the tets `tets`) above its floor (see [`ClampBounds`]).
+    /// tet of clamp region `region` (the one-rings of `vertices`) above its floor (see
+    /// [`ClampBounds`]).
     /// First with the largest drift of any particle in the pass, which costs nothing; if that
     /// is not enough, with the largest drift among the region's own particles.
     #[inline]
-    fn clamp_is_moot<'a>(
-        &self,
-        region: usize,
-        tets: impl Iterator<Item = &'a u32>,
-        largest_move: f32,
-    ) -> bool {
+    fn clamp_is_moot(&self, region: usize, vertices: &[u32], largest_move: f32) -> bool {
         let b = &self.clamp_bounds;
         if !b.active {
             return false;
@@ -392,10 +400,12 @@ impl SoftBodyState {
         if volume_bound(2.0 * (b.max_moved + largest_move), reach) < slack {
             return true;
         }
-        let tet_list = self.mesh.tets();
-        let drift = tets
-            .flat_map(|&t| tet_list[t as usize])
-            .map(|i| b.moved[i as usize])
+        // Every particle of the region is a ring vertex of one of the region's vertices.
+        let mesh = &self.mesh;
+        let drift = vertices
+            .iter()
+            .flat_map(|&v| mesh.ring_vertices(v as usize))
+            .map(|&i| b.moved[i as usize])
             .fold(0.0f32, f32::max);
         volume_bound(2.0 * (drift + largest_move), reach) < slack
     }
