@@ -59,8 +59,9 @@ pub enum ImpulseOutcome {
 /// Every tet's volume can change from its value at the start of the pass only through the
 /// motion of its vertices; if each edge vector moves by at most `delta`, the volume moves by at
 /// most `volume_bound(delta, L)` with `L` the tet's longest edge from its last vertex. `moved`
-/// holds how far each particle's preview has moved in this pass and `max_moved` the largest of
-/// them. An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its
+/// sums how far each particle's preview has moved in this pass and `max_moved` is the largest of
+/// these sums: a bound on every particle's drift that costs nothing to check. The exact drift of
+/// a particle is its distance from `start`, which the second, regional check uses. An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its
 /// floor when `volume_bound(2 (max_moved + m), region_reach)` is below `region_slack`, the
 /// smallest slack above the floor in the region at the start of the pass; then the clamp's answer
 /// is known (no shortening) and its walk over the neighbours is skipped. A tet already below
@@ -78,6 +79,8 @@ pub(crate) struct ClampBounds {
     region_reach: Vec<f32>,
     pub(crate) moved: Vec<f32>,
     pub(crate) max_moved: f32,
+    /// Previews at the start of the pass: a particle's drift is its distance from here.
+    start: Vec<Vec3>,
 }
 
 /// Largest change of a tet's volume when each of its edge vectors (from its last vertex, of
@@ -381,6 +384,8 @@ impl SoftBodyState {
         }
         b.moved.clear();
         b.moved.resize(mesh.vertex_count(), 0.0);
+        b.start.clear();
+        b.start.extend_from_slice(&self.previews);
         b.max_moved = 0.0;
         b.active = true;
     }
@@ -405,8 +410,9 @@ impl SoftBodyState {
         let drift = vertices
             .iter()
             .flat_map(|&v| mesh.ring_vertices(v as usize))
-            .map(|&i| b.moved[i as usize])
-            .fold(0.0f32, f32::max);
+            .map(|&i| (self.previews[i as usize] - b.start[i as usize]).length_squared())
+            .fold(0.0f32, f32::max)
+            .sqrt();
         volume_bound(2.0 * (drift + largest_move), reach) < slack
     }
 
