@@ -299,9 +299,7 @@ impl SoftBodyState {
         self.velocities[i] += dv;
         self.previews[i] += h * dv;
         if self.clamp_bounds.active {
-            let moved = &mut self.clamp_bounds.moved[i];
-            *moved += h * dv.length();
-            self.clamp_bounds.max_moved = self.clamp_bounds.max_moved.max(*moved);
+            self.clamp_bounds.note_move(i, self.previews[i]);
         }
         let k = self.contact_sphere[i];
         if k != u32::MAX

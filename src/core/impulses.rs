@@ -58,15 +58,15 @@ pub enum ImpulseOutcome {
 ///
 /// Every tet's volume can change from its value at the start of the pass only through the
 /// motion of its vertices; if each edge vector moves by at most `delta`, the volume moves by at
-/// most `volume_bound(delta, L)` with `L` the tet's longest edge from its last vertex. `moved`
-/// sums how far each particle's preview has moved in this pass and `max_moved` is the largest of
-/// these sums: a bound on every particle's drift that costs nothing to check. The exact drift of
-/// a particle is its distance from `start`, which the second, regional check uses. An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its
-/// floor when `volume_bound(2 (max_moved + m), region_reach)` is below `region_slack`, the
-/// smallest slack above the floor in the region at the start of the pass; then the clamp's answer
-/// is known (no shortening) and its walk over the neighbours is skipped. A tet already below
-/// `eps` at the start gets half of `CLAMP_SLACK` as slack here, because the drift before an
-/// impulse and the impulse itself each count once.
+/// most `volume_bound(delta, L)` with `L` the tet's longest edge from its last vertex. A
+/// particle's drift is the distance of its preview from where it was at the start of the pass.
+/// An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its floor
+/// when `volume_bound(2 (drift + m), region_reach)` is below `region_slack`, the smallest slack
+/// above the floor in the region at the start of the pass; then the clamp's answer is known (no
+/// shortening) and its walk over the neighbours is skipped. `drift` is first the largest drift
+/// seen in the whole pass (free to check), then, if that is not enough, the largest among the
+/// region's own particles. A tet already below `eps` at the start gets half of `CLAMP_SLACK` as
+/// slack here, because the drift before an impulse and the impulse itself each count once.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct ClampBounds {
     /// Whether the bounds describe the current pass.
@@ -77,10 +77,19 @@ pub(crate) struct ClampBounds {
     vertex_reach: Vec<f32>,
     region_slack: Vec<f32>,
     region_reach: Vec<f32>,
-    pub(crate) moved: Vec<f32>,
-    pub(crate) max_moved: f32,
+    /// The largest drift any particle has had in this pass (drifts can shrink again; this
+    /// cannot, so it bounds every particle's drift now).
+    max_moved: f32,
     /// Previews at the start of the pass: a particle's drift is its distance from here.
     start: Vec<Vec3>,
+}
+
+impl ClampBounds {
+    /// Records that particle `i`'s preview is now at `preview`.
+    #[inline]
+    pub(crate) fn note_move(&mut self, i: usize, preview: Vec3) {
+        self.max_moved = self.max_moved.max((preview - self.start[i]).length());
+    }
 }
 
 /// Largest change of a tet's volume when each of its edge vectors (from its last vertex, of
@@ -382,8 +391,6 @@ impl SoftBodyState {
             b.region_slack[r] = slack;
             b.region_reach[r] = reach;
         }
-        b.moved.clear();
-        b.moved.resize(mesh.vertex_count(), 0.0);
         b.start.clear();
         b.start.extend_from_slice(&self.previews);
         b.max_moved = 0.0;
