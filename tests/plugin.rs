@@ -203,3 +203,42 @@ fn bad_input_gives_errors_not_panics() {
         ]
     );
 }
+
+#[test]
+fn spawn_transform_places_rotates_and_scales_the_body() {
+    let mut app = app(Vec3::ZERO);
+    let mesh = cube(2);
+    let rest_volume = mesh.total_rest_volume();
+    let rotation = Quat::from_rotation_y(0.7);
+    let body = app
+        .world_mut()
+        .spawn((
+            SoftBody::new(mesh, material(VolumeMethod::PAPER_IMPULSES)).unwrap(),
+            Transform::from_xyz(3.0, 1.0, -2.0)
+                .with_rotation(rotation)
+                .with_scale(Vec3::new(2.0, 1.0, 1.0)),
+        ))
+        .id();
+    app.update();
+    let state = app.world().get::<SoftBody>(body).unwrap().state();
+    // The scale is baked into the rest shape: twice the volume, and nothing to restore.
+    let scaled = state.mesh().total_rest_volume();
+    assert!(
+        (scaled - 2.0 * rest_volume).abs() < 1e-6 * scaled,
+        "{scaled} vs {rest_volume}"
+    );
+    assert!(state.volume_metrics().volume_error_pct.abs() < 1e-3);
+    // Particle 0 sits where the transform puts the rest vertex 0.
+    let local = state.mesh().positions()[0];
+    let expected = Vec3::new(3.0, 1.0, -2.0) + rotation * local;
+    assert!(
+        state.positions()[0].distance(expected) < 1e-4,
+        "{} vs {expected}",
+        state.positions()[0]
+    );
+    // From then on the entity's transform follows the body's centre of mass.
+    let transform = app.world().get::<Transform>(body).unwrap();
+    assert!(transform.translation.distance(state.centre_of_mass()) < 1e-4);
+    assert_eq!(transform.rotation, Quat::IDENTITY);
+    assert_eq!(transform.scale, Vec3::ONE);
+}
