@@ -241,20 +241,16 @@ fn prepare(
     }
 }
 
-/// The rigid spheres as the solver sees them during one step: gathered from the
-/// [`RigidSphere`] components in [`SoftBodySet::Forces`], changed by the contact and volume
-/// passes (particles pressed against a sphere move it), written back in
-/// [`SoftBodySet::Integrate`].
+/// The rigid spheres and static colliders as the solver sees them during one step, gathered
+/// once in [`SoftBodySet::Forces`]. The spheres are changed by the contact and volume passes
+/// (particles pressed against a sphere move it) and written back in [`SoftBodySet::Integrate`];
+/// the colliders do not move within a step. The buffers are reused, so a step does not allocate.
 #[derive(Resource, Default)]
 pub struct SolverSpheres {
     entities: Vec<Entity>,
     states: Vec<RigidSphereState>,
+    colliders: Vec<ColliderInstance>,
 }
-
-/// Static colliders as the solver sees them during one step (reused, so a step does not
-/// allocate).
-#[derive(Default)]
-struct SolverColliders(Vec<ColliderInstance>);
 
 fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState {
     let inv_mass = if sphere.mass.is_finite() && sphere.mass > 0.0 {
@@ -277,6 +273,7 @@ fn apply_forces(
     mut solver_spheres: ResMut<SolverSpheres>,
     mut bodies: Query<&mut SoftBody>,
     spheres: Query<(Entity, &RigidSphere, &Transform)>,
+    collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -294,6 +291,15 @@ fn apply_forces(
         solver_spheres.entities.push(entity);
         solver_spheres.states.push(state);
     }
+    solver_spheres.colliders.clear();
+    for (collider, transform) in &collider_query {
+        let pose = Pose::from_parts(transform.translation, transform.rotation);
+        solver_spheres.colliders.push(ColliderInstance::new(
+            collider.shape.clone(),
+            pose,
+            collider.friction,
+        ));
+    }
 }
 
 /// One contact pass over everything: spheres against static colliders, then particles against
@@ -301,28 +307,18 @@ fn apply_forces(
 /// the ground by a sphere pushing it).
 fn contact_pass(
     h: f32,
-    colliders: &mut SolverColliders,
+    colliders: &[ColliderInstance],
     spheres: &mut [RigidSphereState],
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    collider_query: &Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
-    colliders.0.clear();
-    for (collider, transform) in collider_query {
-        let pose = Pose::from_parts(transform.translation, transform.rotation);
-        colliders.0.push(ColliderInstance::new(
-            collider.shape.clone(),
-            pose,
-            collider.friction,
-        ));
-    }
     for sphere in spheres.iter_mut() {
-        sphere.resolve_static_contacts(h, &colliders.0);
+        sphere.resolve_static_contacts(h, colliders);
     }
     for (mut body, mut stats) in bodies.iter_mut() {
         let mut contacts = 0;
         timed(&mut body, |s| {
             contacts += s.resolve_sphere_contacts(h, spheres);
-            contacts += s.resolve_static_contacts(h, &colliders.0);
+            contacts += s.resolve_static_contacts(h, colliders);
         });
         stats.contacts += contacts;
     }
@@ -330,10 +326,8 @@ fn contact_pass(
 
 fn resolve_contacts(
     time: Res<Time>,
-    mut colliders: Local<SolverColliders>,
-    mut spheres: ResMut<SolverSpheres>,
+    mut solver: ResMut<SolverSpheres>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -342,13 +336,8 @@ fn resolve_contacts(
     for (_, mut stats) in &mut bodies {
         stats.contacts = 0;
     }
-    contact_pass(
-        h,
-        &mut colliders,
-        &mut spheres.states,
-        &mut bodies,
-        &collider_query,
-    );
+    let solver = &mut *solver;
+    contact_pass(h, &solver.colliders, &mut solver.states, &mut bodies);
 }
 
 fn one_ring(time: Res<Time>, mut spheres: ResMut<SolverSpheres>, mut bodies: Query<&mut SoftBody>) {
@@ -383,10 +372,8 @@ fn plasticity(time: Res<Time>, mut bodies: Query<&mut SoftBody>) {
 
 fn integrate(
     time: Res<Time>,
-    mut colliders: Local<SolverColliders>,
     mut solver_spheres: ResMut<SolverSpheres>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
     mut spheres: Query<(&mut RigidSphere, &mut Transform), Without<StaticCollider>>,
 ) {
     let h = time.delta_secs();
@@ -396,10 +383,9 @@ fn integrate(
     let solver_spheres = &mut *solver_spheres;
     contact_pass(
         h,
-        &mut colliders,
+        &solver_spheres.colliders,
         &mut solver_spheres.states,
         &mut bodies,
-        &collider_query,
     );
     for (mut body, mut stats) in &mut bodies {
         timed(&mut body, |s| s.integrate_positions(h));

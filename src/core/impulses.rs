@@ -34,6 +34,7 @@ use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients, volume_polynomial};
 use super::material::VolumeMethod;
 use super::roots::{Cubic, first_crossing, monotone_root};
+use super::tet_mesh::TetMesh;
 
 /// What one impulse did.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -147,8 +148,10 @@ impl SoftBodyState {
         if settings.neighbour_clamp {
             self.prepare_clamp_bounds(ClampRegions::Rings);
         }
-        for p in 0..self.positions.len() {
-            self.ring_impulse(p, h, settings.neighbour_clamp, spheres);
+        // One handle on the mesh for the whole pass, not one per impulse.
+        let mesh = self.mesh.clone();
+        for p in 0..mesh.vertex_count() {
+            self.ring_impulse(&mesh, p, h, settings.neighbour_clamp, spheres);
         }
         self.clamp_bounds.active = false;
     }
@@ -167,8 +170,10 @@ impl SoftBodyState {
         if settings.neighbour_clamp {
             self.prepare_clamp_bounds(ClampRegions::Tets);
         }
-        for t in 0..self.mesh.tet_count() {
+        let mesh = self.mesh.clone();
+        for t in 0..mesh.tet_count() {
             self.tet_impulse(
+                &mesh,
                 t,
                 h,
                 settings.gamma as f64,
@@ -184,12 +189,12 @@ impl SoftBodyState {
     /// positive root of `sum_t V_t(s) = sum_t V0_t`. Needs `refresh_previews` first.
     pub(crate) fn ring_impulse(
         &mut self,
+        mesh: &TetMesh,
         p: usize,
         h: f32,
         clamp: bool,
         spheres: &mut [RigidSphereState],
     ) -> ImpulseOutcome {
-        let mesh = self.mesh.clone();
         let ring = mesh.one_ring(p);
         let vertices = mesh.ring_vertices(p);
         let mut rest = 0.0f64;
@@ -274,13 +279,13 @@ impl SoftBodyState {
     /// smallest positive root of `V_t(s) = V0_t`. Needs `refresh_previews` first.
     pub(crate) fn tet_impulse(
         &mut self,
+        mesh: &TetMesh,
         t: usize,
         h: f32,
         gamma: f64,
         clamp: bool,
         spheres: &mut [RigidSphereState],
     ) -> ImpulseOutcome {
-        let mesh = self.mesh.clone();
         let tet = mesh.tets()[t];
         let v0 = mesh.rest_volumes()[t];
         let xp = tet.map(|i| self.preview(i));
@@ -556,7 +561,7 @@ mod tests {
         let mut applied = 0;
         for p in 0..body.positions.len() {
             let before = body.linear_momentum();
-            let outcome = body.ring_impulse(p, H, true, &mut []);
+            let outcome = body.ring_impulse(&body.mesh.clone(), p, H, true, &mut []);
             let after = body.linear_momentum();
             if let ImpulseOutcome::Applied { .. } = outcome {
                 applied += 1;
@@ -568,7 +573,7 @@ mod tests {
         }
         for t in 0..body.mesh.tet_count() {
             let before = body.linear_momentum();
-            body.tet_impulse(t, H, 0.125, true, &mut []);
+            body.tet_impulse(&body.mesh.clone(), t, H, 0.125, true, &mut []);
             let after = body.linear_momentum();
             assert!(
                 (after - before).length() < 1e-4,
@@ -592,7 +597,7 @@ mod tests {
                 .map(|&t| body.mesh.rest_volumes()[t as usize])
                 .sum();
             if let ImpulseOutcome::Applied { step, root, .. } =
-                body.ring_impulse(p, H, false, &mut [])
+                body.ring_impulse(&body.mesh.clone(), p, H, false, &mut [])
             {
                 if step < root {
                     limited += 1;
@@ -616,7 +621,9 @@ mod tests {
     fn tet_impulse_with_gamma_one_restores_the_tet_volume() {
         let mut body = shaken_body(1.0);
         for t in 0..body.mesh.tet_count() {
-            if let ImpulseOutcome::Applied { .. } = body.tet_impulse(t, H, 1.0, false, &mut []) {
+            if let ImpulseOutcome::Applied { .. } =
+                body.tet_impulse(&body.mesh.clone(), t, H, 1.0, false, &mut [])
+            {
                 // gamma = 1 applies the whole root.
                 let v0 = body.mesh.rest_volumes()[t];
                 let v = previewed_volume(&body, t);
@@ -634,7 +641,7 @@ mod tests {
         for p in 0..body.positions.len() {
             let before: Vec<f32> = (0..tets).map(|t| previewed_volume(&body, t)).collect();
             if let ImpulseOutcome::Applied { clamped: c, .. } =
-                body.ring_impulse(p, H, true, &mut [])
+                body.ring_impulse(&body.mesh.clone(), p, H, true, &mut [])
             {
                 clamped += c as usize;
             }
@@ -661,7 +668,7 @@ mod tests {
         }
         for t in 0..tets {
             let before: Vec<f32> = (0..tets).map(|u| previewed_volume(&body, u)).collect();
-            body.tet_impulse(t, H, 0.125, true, &mut []);
+            body.tet_impulse(&body.mesh.clone(), t, H, 0.125, true, &mut []);
             for (u, &before_u) in before.iter().enumerate() {
                 let eps = CLAMP_FRACTION * body.mesh.rest_volumes()[u];
                 let after = previewed_volume(&body, u);
@@ -755,10 +762,10 @@ mod tests {
         body.set_kinematic(0, body.positions[0]).unwrap();
         body.refresh_previews(H);
         for p in 0..body.positions.len() {
-            body.ring_impulse(p, H, true, &mut []);
+            body.ring_impulse(&body.mesh.clone(), p, H, true, &mut []);
         }
         for t in 0..body.mesh.tet_count() {
-            body.tet_impulse(t, H, 0.125, true, &mut []);
+            body.tet_impulse(&body.mesh.clone(), t, H, 0.125, true, &mut []);
         }
         assert_eq!(body.velocities[0], v_before);
     }
