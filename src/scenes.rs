@@ -62,6 +62,8 @@ pub struct SceneParams {
     pub density: f32,
     /// Spring damping.
     pub damping: f32,
+    /// Drag on the particles' velocities, 1/s (see [`SoftBodyMaterial::linear_damping`]).
+    pub linear_damping: f32,
     /// Gravity, m/s^2 (downwards).
     pub gravity: f32,
     /// Height of the body's lowest point above the ground at spawn, m.
@@ -119,16 +121,18 @@ impl PaperScene {
         match self {
             PaperScene::BarTwist => SceneParams {
                 density: 1000.0,
-                damping: 1.0,
+                damping: 4.0,
+                linear_damping: 0.6,
                 gravity: 0.0,
                 lift: 0.0,
                 speed: 0.0,
                 sphere: None,
-                duration_secs: 8.0,
+                duration_secs: 16.0,
             },
             PaperScene::SphereOnBar => SceneParams {
                 density: 1000.0,
                 damping: 1.0,
+                linear_damping: 0.0,
                 gravity: 0.2,
                 lift: 1.0,
                 speed: 0.0,
@@ -144,6 +148,7 @@ impl PaperScene {
             PaperScene::SoftCube => SceneParams {
                 density: 8000.0,
                 damping: 4.0,
+                linear_damping: 0.0,
                 gravity: 0.02,
                 lift: 0.0,
                 speed: 0.0,
@@ -159,6 +164,7 @@ impl PaperScene {
             PaperScene::Creature => SceneParams {
                 density: 1000.0,
                 damping: 1.0,
+                linear_damping: 0.0,
                 gravity: 0.1,
                 lift: 0.5,
                 speed: 0.7,
@@ -168,6 +174,7 @@ impl PaperScene {
             PaperScene::Plastic => SceneParams {
                 density: 4000.0,
                 damping: 2.0,
+                linear_damping: 0.0,
                 gravity: 1.0,
                 lift: 0.0,
                 speed: 0.0,
@@ -200,6 +207,7 @@ impl PaperScene {
             density: params.density,
             distance_stiffness: self.distance_stiffness(),
             damping: params.damping,
+            linear_damping: params.linear_damping,
             friction: 0.6,
             method,
             plasticity: (self == PaperScene::Plastic).then_some(Plasticity {
@@ -274,7 +282,7 @@ impl PaperScene {
                         Transform::from_translation(centre),
                         TwistDriver {
                             body: body_entity,
-                            turns: 1.0,
+                            turns: 1.5,
                             ramp_secs: 3.0,
                             hold_secs: 1.0,
                             axis: Vec3::X,

@@ -357,6 +357,15 @@ impl SoftBodyState {
         if damping > 0.0 {
             self.damp_springs(h, damping);
         }
+        let drag = self.material.linear_damping;
+        if drag > 0.0 {
+            let keep = 1.0 / (1.0 + h * drag);
+            for (vel, &w) in self.velocities.iter_mut().zip(&self.inv_masses) {
+                if w > 0.0 {
+                    *vel *= keep;
+                }
+            }
+        }
         for &(i, target) in &self.kinematic {
             let i = i as usize;
             self.velocities[i] = (target - self.positions[i]) / h;

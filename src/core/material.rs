@@ -90,6 +90,13 @@ pub struct SoftBodyMaterial {
     /// Damping along each spring, in force per unit of relative velocity (N s/m), applied
     /// implicitly so that any value is stable.
     pub damping: f32,
+    /// Drag on every particle's velocity, per second (like a rigid body's linear damping in
+    /// avian or rapier): each step keeps `1 / (1 + h c)` of it. Spring damping only acts on
+    /// how fast springs change length, so it barely touches slow, large motions of a soft
+    /// body (a long bar's torsion swings with a period of seconds); this settles them. It
+    /// also slows a falling body, so keep it small (0 is a body in vacuum, and conserves
+    /// momentum).
+    pub linear_damping: f32,
     /// Coulomb friction coefficient against colliders and spheres.
     pub friction: f32,
     /// How volume is kept.
@@ -104,6 +111,7 @@ impl Default for SoftBodyMaterial {
             density: 1000.0,
             distance_stiffness: 1.0,
             damping: 1.0,
+            linear_damping: 0.0,
             friction: 0.5,
             method: VolumeMethod::default(),
             plasticity: None,
@@ -155,6 +163,7 @@ impl SoftBodyMaterial {
         positive("density", self.density)?;
         non_negative("distance_stiffness", self.distance_stiffness)?;
         non_negative("damping", self.damping)?;
+        non_negative("linear_damping", self.linear_damping)?;
         non_negative("friction", self.friction)?;
         match self.method {
             VolumeMethod::Baseline { volume_stiffness } => {
