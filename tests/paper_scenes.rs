@@ -62,7 +62,10 @@ fn bar_twist_returns_to_rest_shape() {
         end < 0.15 * twisted,
         "the bar did not return to its rest shape: {end} m vs {twisted} m"
     );
-    assert!(speed < 0.02, "the bar is still swinging: rms speed {speed} m/s");
+    assert!(
+        speed < 0.02,
+        "the bar is still swinging: rms speed {speed} m/s"
+    );
 }
 
 fn rms_speed(velocities: &[Vec3]) -> f32 {

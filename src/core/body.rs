@@ -105,6 +105,9 @@ pub struct SoftBodyState {
     pub(crate) contact_sphere: Vec<u32>,
     /// The particles with a non-zero entry in `contact_normals`, to clear them cheaply.
     pub(crate) touching: Vec<u32>,
+    /// The volume and gradients of each tet of the one-ring being corrected, so that its
+    /// polynomial need not compute them again; as long as the largest one-ring.
+    pub(crate) ring_tets: Vec<(f32, [Vec3; 4])>,
     pub(crate) counters: StepCounters,
 }
 
@@ -135,6 +138,10 @@ impl SoftBodyState {
             contact_kept: vec![0.0; n],
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::new(),
+            ring_tets: vec![
+                (0.0, [Vec3::ZERO; 4]);
+                (0..n).map(|v| mesh.one_ring(v).len()).max().unwrap_or(0)
+            ],
             counters: StepCounters::default(),
             mesh,
         };

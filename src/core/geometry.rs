@@ -49,6 +49,32 @@ pub fn volume_polynomial(p: &[Vec3; 4], d: &[Vec3; 4]) -> Cubic {
     ]
 }
 
+/// [`volume_polynomial`] for a tet whose volume `volume` and gradients `g` at `p` are already
+/// known: the constant and linear coefficients then cost a few dot products, and only the
+/// quadratic and cubic ones need cross products. The volume passes compute the gradients anyway
+/// (for the directions), so this saves them more than half the work of each polynomial.
+#[inline]
+pub fn volume_polynomial_with_gradients(
+    p: &[Vec3; 4],
+    volume: f32,
+    g: &[Vec3; 4],
+    d: &[Vec3; 4],
+) -> Cubic {
+    let (ea, eb, ec) = (p[0] - p[3], p[1] - p[3], p[2] - p[3]);
+    let (fa, fb, fc) = (d[0] - d[3], d[1] - d[3], d[2] - d[3]);
+    let c1 = g[0].dot(fa) + g[1].dot(fb) + g[2].dot(fc);
+    let fbc = fb.cross(fc);
+    let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
+    let c3 = fa.dot(fbc);
+    let sixth = 1.0 / 6.0;
+    [
+        volume as f64,
+        c1 as f64,
+        c2 as f64 * sixth,
+        c3 as f64 * sixth,
+    ]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -101,6 +127,14 @@ mod tests {
                 *v = Vec3::ZERO;
             }
             let c = volume_polynomial(&p, &d);
+            let from_gradients =
+                volume_polynomial_with_gradients(&p, signed_volume(&p), &volume_gradients(&p), &d);
+            for (a, b) in c.iter().zip(&from_gradients) {
+                assert!(
+                    (a - b).abs() < 1e-5 * (1.0 + a.abs()),
+                    "{c:?} vs {from_gradients:?}"
+                );
+            }
             if fixed == 3 {
                 assert!(
                     c[2].abs() < 1e-6 && c[3].abs() < 1e-6,
