@@ -20,6 +20,8 @@ use crate::core::{MaterialError, SoftBodyMaterial, SoftBodyState, StepCounters, 
 pub struct SoftBody {
     pub(crate) state: SoftBodyState,
     pub(crate) placed: bool,
+    /// The scale of the spawn transform, baked into the rest shape at placement.
+    pub(crate) rest_scale: Vec3,
     pub(crate) step_time: Duration,
 }
 
@@ -29,6 +31,7 @@ impl SoftBody {
         Ok(SoftBody {
             state: SoftBodyState::new(mesh, material)?,
             placed: false,
+            rest_scale: Vec3::ONE,
             step_time: Duration::ZERO,
         })
     }
@@ -46,6 +49,12 @@ impl SoftBody {
     /// Whether the body has been placed at its spawn transform yet.
     pub fn is_placed(&self) -> bool {
         self.placed
+    }
+
+    /// The scale of the spawn transform, which the rest shape (`state().mesh()`) includes:
+    /// a point of the mesh as given is at `point * rest_scale()` in the rest shape.
+    pub fn rest_scale(&self) -> Vec3 {
+        self.rest_scale
     }
 }
 
@@ -221,6 +230,13 @@ pub enum SoftBodyErrorKind {
         /// Why it could not be used.
         reason: String,
     },
+    /// A render surface (feature `render`) could not be bound to the body; it is not deformed.
+    Surface {
+        /// The entity of the surface.
+        surface: Entity,
+        /// Why.
+        reason: String,
+    },
 }
 
 impl std::fmt::Display for SoftBodyError {
@@ -239,6 +255,11 @@ impl std::fmt::Display for SoftBodyError {
             SoftBodyErrorKind::BadScale { scale, reason } => write!(
                 f,
                 "soft body {}: cannot apply the scale {scale}: {reason}; the body keeps its size",
+                self.body
+            ),
+            SoftBodyErrorKind::Surface { surface, reason } => write!(
+                f,
+                "soft body {}: surface {surface} cannot follow it: {reason}",
                 self.body
             ),
         }

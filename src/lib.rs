@@ -28,12 +28,16 @@ pub mod components;
 pub mod core;
 pub mod plugin;
 pub mod scenes;
+#[cfg(feature = "render")]
+pub mod surface;
 
 pub use components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
     SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
-pub use plugin::{SoftBodyPlugin, SoftBodySet};
+pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyTiming};
+#[cfg(feature = "render")]
+pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSet};
 
 /// Everything a game usually needs.
 pub mod prelude {
@@ -43,4 +47,6 @@ pub mod prelude {
     };
     pub use crate::core::{ImpulseSettings, Plasticity, SoftBodyMaterial, TetMesh, VolumeMethod};
     pub use crate::plugin::{SoftBodyPlugin, SoftBodySet};
+    #[cfg(feature = "render")]
+    pub use crate::surface::{SoftBodySurface, SoftBodySurfacePlugin};
 }

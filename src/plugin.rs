@@ -68,8 +68,19 @@ impl SoftBodyPlugin {
     }
 }
 
+/// How the plugin was set up, for systems outside the step (the render surfaces).
+#[derive(Resource, Clone, Copy, Debug)]
+pub struct SoftBodyTiming {
+    /// Whether the steps run in [`FixedUpdate`], so that frames fall between steps and are
+    /// drawn interpolated.
+    pub fixed: bool,
+}
+
 impl Plugin for SoftBodyPlugin {
     fn build(&self, app: &mut App) {
+        app.insert_resource(SoftBodyTiming {
+            fixed: self.schedule == FixedUpdate.intern(),
+        });
         app.init_resource::<SoftBodyGravity>()
             .register_type::<SoftBodyGravity>()
             .register_type::<SoftBodyStats>()
@@ -159,7 +170,10 @@ fn prepare(
                         SoftBodyState::new(m.into(), *body.state.material())
                             .map_err(|e| e.to_string())
                     }) {
-                    Ok(state) => body.state = state,
+                    Ok(state) => {
+                        body.state = state;
+                        body.rest_scale = placement.scale;
+                    }
                     Err(reason) => report(
                         &mut errors,
                         SoftBodyError {

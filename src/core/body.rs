@@ -74,6 +74,8 @@ pub struct StepCounters {
 pub struct SoftBodyState {
     pub(crate) mesh: Arc<TetMesh>,
     pub(crate) positions: Vec<Vec3>,
+    /// Positions at the start of the last step, to interpolate between steps when rendering.
+    previous_positions: Vec<Vec3>,
     pub(crate) velocities: Vec<Vec3>,
     pub(crate) masses: Vec<f32>,
     /// Inverse masses as used in this step: zero for kinematic particles.
@@ -123,6 +125,7 @@ impl SoftBodyState {
             .collect();
         let mut body = SoftBodyState {
             positions: mesh.positions().to_vec(),
+            previous_positions: mesh.positions().to_vec(),
             velocities: vec![Vec3::ZERO; n],
             masses: vec![0.0; n],
             inv_masses: vec![0.0; n],
@@ -174,6 +177,12 @@ impl SoftBodyState {
         &self.positions
     }
 
+    /// Particle positions at the start of the last step (equal to [`Self::positions`] before
+    /// the first). A renderer drawing between two steps interpolates from these.
+    pub fn previous_positions(&self) -> &[Vec3] {
+        &self.previous_positions
+    }
+
     /// Particle velocities.
     pub fn velocities(&self) -> &[Vec3] {
         &self.velocities
@@ -192,12 +201,14 @@ impl SoftBodyState {
     /// Moves every particle by `offset` (the rest state is unchanged).
     pub fn translate(&mut self, offset: Vec3) {
         self.positions.iter_mut().for_each(|p| *p += offset);
+        self.previous_positions.copy_from_slice(&self.positions);
     }
 
     /// Maps every particle through `f` (for placing a body); the rest state is unchanged, so a
     /// map that is not a rigid motion is a deformation the body will undo.
     pub fn map_positions(&mut self, f: impl Fn(Vec3) -> Vec3) {
         self.positions.iter_mut().for_each(|p| *p = f(*p));
+        self.previous_positions.copy_from_slice(&self.positions);
     }
 
     /// The material.
@@ -252,6 +263,7 @@ impl SoftBodyState {
     /// Starts a step: clears the counters and last step's contacts.
     pub fn begin_step(&mut self) {
         self.counters = StepCounters::default();
+        self.previous_positions.copy_from_slice(&self.positions);
         for &i in &self.touching {
             self.contact_normals[i as usize] = Vec3::ZERO;
             self.contact_sphere[i as usize] = u32::MAX;

@@ -3,16 +3,20 @@
 
 pub mod body;
 pub mod contacts;
+pub mod embedding;
 pub mod geometry;
 pub mod grid;
 pub mod impulses;
 pub mod material;
 pub mod roots;
+pub mod surface_mesh;
 pub mod tet_mesh;
 
 pub use body::{ParticleIndexError, SoftBodyState, StepCounters, VolumeMetrics};
 pub use contacts::{ColliderInstance, RigidSphereState};
+pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::ImpulseOutcome;
+pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets};
 pub use material::{ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod};
 pub use tet_mesh::{TetMesh, TetMeshError};

@@ -1,0 +1,201 @@
+//! Embedded render surfaces: a detailed Bevy [`Mesh`] that follows a soft body's coarse tet
+//! mesh, as in the paper, where the simulation runs on tets and the player sees a fine surface.
+//!
+//! Put [`SoftBodySurface`] next to a [`Mesh3d`] (and a material) on a top-level entity, often
+//! the soft body's own entity, and add [`SoftBodySurfacePlugin`]. The mesh is given in the same
+//! frame as the body's tet mesh (the model's own coordinates, before the spawn transform). The
+//! first frame both the body is placed and the mesh asset is loaded, each vertex is bound to a
+//! tet ([`SurfaceBinding`]); every frame after that the vertices follow the particles, the
+//! normals are recomputed and the entity's [`Aabb`] is set to the new bounds, so culling follows
+//! the body. The mesh must keep [`RenderAssetUsages::MAIN_WORLD`] (the default for meshes built
+//! in code) so that it can be edited.
+//!
+//! Physics runs at a fixed 100 Hz; frames come at any rate. The surface is drawn between the
+//! last two physics states, interpolated by how far the frame is into the next step
+//! ([`Time<Fixed>::overstep_fraction`]), so motion does not stutter at 60, 144 or 45 Hz. This
+//! costs one step of latency, which is the usual price of interpolation.
+//!
+//! [`RenderAssetUsages::MAIN_WORLD`]: bevy::asset::RenderAssetUsages::MAIN_WORLD
+
+use bevy::camera::primitives::Aabb;
+use bevy::camera::visibility::VisibilitySystems;
+use bevy::mesh::VertexAttributeValues;
+use bevy::prelude::*;
+
+use crate::components::{SoftBody, SoftBodyError, SoftBodyErrorKind};
+use crate::core::SurfaceBinding;
+use crate::plugin::SoftBodyTiming;
+
+/// Deforms the [`Mesh3d`] of its entity to follow the particles of the soft body `body`.
+#[derive(Component, Debug)]
+#[require(Transform)]
+pub struct SoftBodySurface {
+    /// The soft body entity (may be this entity).
+    pub body: Entity,
+    binding: Option<SurfaceBinding>,
+    /// Interpolated particle positions, then surface points: reused every frame.
+    particles: Vec<Vec3>,
+    points: Vec<Vec3>,
+    /// An error was reported; the surface is left as it is.
+    failed: bool,
+}
+
+impl SoftBodySurface {
+    /// A surface following the soft body `body`.
+    pub fn new(body: Entity) -> Self {
+        SoftBodySurface {
+            body,
+            binding: None,
+            particles: Vec::new(),
+            points: Vec::new(),
+            failed: false,
+        }
+    }
+
+    /// The binding of the mesh's vertices to tets, once made.
+    pub fn binding(&self) -> Option<&SurfaceBinding> {
+        self.binding.as_ref()
+    }
+}
+
+/// System set of the surface update, in [`PostUpdate`] before bounds are computed.
+#[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SoftBodySurfaceSet;
+
+/// Updates every [`SoftBodySurface`]. Needs the asset and mesh plugins (part of
+/// `DefaultPlugins`) and [`crate::SoftBodyPlugin`].
+pub struct SoftBodySurfacePlugin;
+
+impl Plugin for SoftBodySurfacePlugin {
+    fn build(&self, app: &mut App) {
+        app.configure_sets(
+            PostUpdate,
+            SoftBodySurfaceSet.before(VisibilitySystems::CalculateBounds),
+        )
+        .add_systems(PostUpdate, deform_surfaces.in_set(SoftBodySurfaceSet));
+    }
+}
+
+fn deform_surfaces(
+    fixed: Res<Time<Fixed>>,
+    timing: Option<Res<SoftBodyTiming>>,
+    bodies: Query<&SoftBody>,
+    mut surfaces: Query<(
+        Entity,
+        &mut SoftBodySurface,
+        &Mesh3d,
+        &Transform,
+        Option<&mut Aabb>,
+    )>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut commands: Commands,
+    mut errors: MessageWriter<SoftBodyError>,
+) {
+    let interpolate = timing.is_none_or(|t| t.fixed);
+    let alpha = if interpolate {
+        fixed.overstep_fraction().clamp(0.0, 1.0)
+    } else {
+        1.0
+    };
+    for (entity, mut surface, mesh3d, transform, aabb) in &mut surfaces {
+        let surface = &mut *surface;
+        if surface.failed {
+            continue;
+        }
+        let mut fail = |surface: &mut SoftBodySurface, reason: String| {
+            surface.failed = true;
+            let error = SoftBodyError {
+                body: surface.body,
+                kind: SoftBodyErrorKind::Surface {
+                    surface: entity,
+                    reason,
+                },
+            };
+            error!("{error}");
+            errors.write(error);
+        };
+        let Ok(body) = bodies.get(surface.body) else {
+            fail(surface, "its soft body entity has no SoftBody".into());
+            continue;
+        };
+        if !body.is_placed() {
+            continue;
+        }
+        let state = body.state();
+        if surface.binding.is_none() {
+            // Not loaded yet: try again next frame.
+            let Some(mesh) = meshes.get(&mesh3d.0) else {
+                continue;
+            };
+            let Some(VertexAttributeValues::Float32x3(vertices)) =
+                mesh.attribute(Mesh::ATTRIBUTE_POSITION)
+            else {
+                fail(surface, "the mesh has no Float32x3 vertex positions".into());
+                continue;
+            };
+            let scale = body.rest_scale();
+            let rest: Vec<Vec3> = vertices.iter().map(|&v| Vec3::from(v) * scale).collect();
+            match SurfaceBinding::new(state.mesh(), &rest) {
+                Ok(binding) => {
+                    surface.points = vec![Vec3::ZERO; binding.len()];
+                    surface.particles = vec![Vec3::ZERO; state.positions().len()];
+                    surface.binding = Some(binding);
+                }
+                Err(e) => {
+                    fail(surface, e.to_string());
+                    continue;
+                }
+            }
+        }
+        let Some(mut mesh) = meshes.get_mut(&mesh3d.0) else {
+            continue;
+        };
+        if mesh.count_vertices() != surface.points.len() {
+            // The asset was replaced by one with another vertex count: bind again.
+            surface.binding = None;
+            continue;
+        }
+        let SoftBodySurface {
+            binding,
+            particles,
+            points,
+            ..
+        } = surface;
+        let binding = binding.as_ref().expect("bound above");
+        for ((p, &a), &b) in particles
+            .iter_mut()
+            .zip(state.previous_positions())
+            .zip(state.positions())
+        {
+            *p = a.lerp(b, alpha);
+        }
+        binding.deform(state.mesh(), particles, points);
+        // Vertices are written in the entity's own frame (a top-level entity: its transform is
+        // its world transform).
+        let to_local = transform.compute_affine().inverse();
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        let Some(VertexAttributeValues::Float32x3(vertices)) =
+            mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+        else {
+            continue;
+        };
+        for (v, &p) in vertices.iter_mut().zip(points.iter()) {
+            let local = Vec3::from(to_local.transform_point3(p));
+            lo = lo.min(local);
+            hi = hi.max(local);
+            *v = local.to_array();
+        }
+        if mesh.indices().is_some() {
+            let _ = mesh.try_compute_smooth_normals();
+        } else {
+            let _ = mesh.try_compute_flat_normals();
+        }
+        let bounds = Aabb::from_min_max(lo, hi);
+        match aabb {
+            Some(mut aabb) => *aabb = bounds,
+            None => {
+                commands.entity(entity).insert(bounds);
+            }
+        }
+    }
+}
