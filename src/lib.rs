@@ -37,7 +37,7 @@ pub use components::{
 };
 pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyTiming};
 #[cfg(feature = "render")]
-pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSet};
+pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSet, surface_mesh};
 
 /// Everything a game usually needs.
 pub mod prelude {

@@ -241,6 +241,33 @@ impl PaperScene {
         Arc::new(mesh.expect("the built-in scene meshes are valid"))
     }
 
+    /// The detailed surface drawn for the scene's body, in the tet mesh's frame: a box
+    /// subdivided four times finer than its cells, or the creature's signed distance function
+    /// sampled three times finer than its tet grid.
+    pub fn render_surface(self) -> crate::core::TriangleSurface {
+        match self {
+            PaperScene::Creature => {
+                let (lo, hi) = creature_bounds();
+                let margin = Vec3::splat(CREATURE_CELL);
+                crate::core::surface_nets(
+                    creature_sdf,
+                    lo - margin,
+                    hi + margin,
+                    CREATURE_CELL / 3.0,
+                )
+            }
+            _ => {
+                let (lo, hi) = self.tet_mesh().bounds();
+                let cell = if self == PaperScene::SoftCube {
+                    SOFT_CUBE_CELL
+                } else {
+                    CELL
+                };
+                crate::core::subdivided_box(lo, hi, cell / 4.0)
+            }
+        }
+    }
+
     /// Spawns the scene with its body simulated by `method`, shifted by `offset` (to put two
     /// copies side by side). Sets the gravity resource. Returns the body entity.
     pub fn spawn(self, commands: &mut Commands, method: VolumeMethod, offset: Vec3) -> Entity {

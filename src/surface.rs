@@ -58,6 +58,21 @@ impl SoftBodySurface {
     }
 }
 
+/// A Bevy mesh of `surface`, editable in the main world (as [`SoftBodySurface`] needs), with
+/// normals.
+pub fn surface_mesh(surface: &crate::core::TriangleSurface) -> Mesh {
+    use bevy::asset::RenderAssetUsages;
+    use bevy::mesh::{Indices, PrimitiveTopology};
+    let positions: Vec<[f32; 3]> = surface.positions.iter().map(|p| p.to_array()).collect();
+    Mesh::new(
+        PrimitiveTopology::TriangleList,
+        RenderAssetUsages::MAIN_WORLD | RenderAssetUsages::RENDER_WORLD,
+    )
+    .with_inserted_attribute(Mesh::ATTRIBUTE_POSITION, positions)
+    .with_inserted_indices(Indices::U32(surface.indices.clone()))
+    .with_computed_smooth_normals()
+}
+
 /// System set of the surface update, in [`PostUpdate`] before bounds are computed.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SoftBodySurfaceSet;

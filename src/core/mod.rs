@@ -17,6 +17,6 @@ pub use contacts::{ColliderInstance, RigidSphereState};
 pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::ImpulseOutcome;
-pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets};
 pub use material::{ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod};
+pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets};
 pub use tet_mesh::{TetMesh, TetMeshError};

@@ -66,7 +66,12 @@ pub fn subdivided_box(lo: Vec3, hi: Vec3, spacing: f32) -> TriangleSurface {
 /// by surface nets: one vertex per grid cell the surface crosses, at the mean of the crossings
 /// on the cell's edges, and one quad per grid edge the surface crosses. Smooth, watertight where
 /// the surface stays inside the box, and oriented outwards (along the gradient of `sdf`).
-pub fn surface_nets(sdf: impl Fn(Vec3) -> f32, lo: Vec3, hi: Vec3, spacing: f32) -> TriangleSurface {
+pub fn surface_nets(
+    sdf: impl Fn(Vec3) -> f32,
+    lo: Vec3,
+    hi: Vec3,
+    spacing: f32,
+) -> TriangleSurface {
     let spacing = spacing.max(f32::EPSILON);
     let n = ((hi - lo) / spacing).ceil().as_ivec3() + 1;
     let corner = |c: IVec3| lo + c.as_vec3() * spacing;
@@ -136,7 +141,10 @@ pub fn surface_nets(sdf: impl Fn(Vec3) -> f32, lo: Vec3, hi: Vec3, spacing: f32)
                         continue;
                     }
                     let around = [c - u - v, c - v, c, c - u];
-                    if around.iter().any(|q| q.cmplt(IVec3::ZERO).any() || q.cmpge(cells).any()) {
+                    if around
+                        .iter()
+                        .any(|q| q.cmplt(IVec3::ZERO).any() || q.cmpge(cells).any())
+                    {
                         continue;
                     }
                     let q = around.map(|q| vertex_of[cell_index(q)]);
@@ -193,7 +201,12 @@ mod tests {
     #[test]
     fn surface_nets_of_a_sphere_are_outward_and_keep_its_volume() {
         let r = 0.5;
-        let s = surface_nets(|p| p.length() - r, Vec3::splat(-0.7), Vec3::splat(0.7), 0.05);
+        let s = surface_nets(
+            |p| p.length() - r,
+            Vec3::splat(-0.7),
+            Vec3::splat(0.7),
+            0.05,
+        );
         let exact = 4.0 / 3.0 * std::f32::consts::PI * r * r * r;
         let v = enclosed_volume(&s);
         assert!((v - exact).abs() < 0.03 * exact, "{v} vs {exact}");
