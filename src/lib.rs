@@ -26,6 +26,10 @@
 
 pub mod components;
 pub mod core;
+#[cfg(feature = "render")]
+pub mod debug;
+#[cfg(feature = "egui")]
+pub mod inspector;
 pub mod plugin;
 pub mod scenes;
 #[cfg(feature = "render")]

@@ -323,6 +323,7 @@ impl PaperScene {
                             ramp_secs: 3.0,
                             hold_secs: 1.0,
                             axis: Vec3::X,
+                            elapsed: 0.0,
                         },
                         Name::new("twist handle"),
                     ))
@@ -364,9 +365,13 @@ pub struct TwistDriver {
     pub hold_secs: f32,
     /// The axis of the turn.
     pub axis: Vec3,
+    /// Simulated seconds since the twist began (counted here, so a scene spawned again later
+    /// starts from the beginning).
+    pub elapsed: f32,
 }
 
-/// Despawns its entity after this many seconds of simulated time (the plastic scene's sphere).
+/// Despawns its entity after this many more seconds of simulated time (the plastic scene's
+/// sphere).
 #[derive(Component, Clone, Copy, Debug, Reflect)]
 #[reflect(Component)]
 pub struct RemoveAfter(pub f32);
@@ -389,11 +394,12 @@ impl Plugin for PaperScenesPlugin {
 fn drive_twist(
     time: Res<Time>,
     mut commands: Commands,
-    mut drivers: Query<(Entity, &TwistDriver, &mut Transform)>,
+    mut drivers: Query<(Entity, &mut TwistDriver, &mut Transform)>,
 ) {
-    // The time at the end of the coming step: the particles reach the target during it.
-    let t = time.elapsed_secs() + time.delta_secs();
-    for (entity, driver, mut transform) in &mut drivers {
+    for (entity, mut driver, mut transform) in &mut drivers {
+        driver.elapsed += time.delta_secs();
+        // A step ahead: the particles reach the target during the coming step.
+        let t = driver.elapsed + time.delta_secs();
         let progress = (t / driver.ramp_secs).min(1.0);
         // Smooth start and stop, so the twist does not kick the bar.
         let eased = progress * progress * (3.0 - 2.0 * progress);
@@ -406,9 +412,15 @@ fn drive_twist(
     }
 }
 
-fn remove_after(time: Res<Time>, mut commands: Commands, items: Query<(Entity, &RemoveAfter)>) {
-    for (entity, after) in &items {
-        if time.elapsed_secs() >= after.0 {
+fn remove_after(
+    time: Res<Time>,
+    mut commands: Commands,
+    mut items: Query<(Entity, &mut RemoveAfter)>,
+) {
+    for (entity, mut remaining) in &mut items {
+        remaining.0 -= time.delta_secs();
+        // Half a step of slack against rounding: "after 3 s" means at the step that ends at 3 s.
+        if remaining.0 <= 0.5 * time.delta_secs() {
             commands.entity(entity).despawn();
         }
     }

@@ -177,6 +177,14 @@ impl SoftBodyState {
         &self.positions
     }
 
+    /// The particles that touched a collider or sphere in the last step, with the outward
+    /// normal of what they touched.
+    pub fn contacts(&self) -> impl Iterator<Item = (usize, Vec3)> + '_ {
+        self.touching
+            .iter()
+            .map(|&i| (i as usize, self.contact_normals[i as usize]))
+    }
+
     /// Particle positions at the start of the last step (equal to [`Self::positions`] before
     /// the first). A renderer drawing between two steps interpolates from these.
     pub fn previous_positions(&self) -> &[Vec3] {
