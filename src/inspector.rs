@@ -94,13 +94,18 @@ fn inspector_panel(
         .resizable(true)
         .show(&mut root, |ui| {
             ui.heading("Soft bodies");
+            // (entity, label, baseline?)
             let mut names = Vec::new();
             egui::ScrollArea::vertical()
                 .max_height(ui.available_height() - 250.0)
                 .show(ui, |ui| {
                     for (entity, name, mut body, stats) in &mut bodies {
                         let label = name.map_or_else(|| format!("{entity}"), |n| n.to_string());
-                        names.push((entity, label.clone()));
+                        let baseline = matches!(
+                            body.state().material().method,
+                            VolumeMethod::Baseline { .. }
+                        );
+                        names.push((entity, label.clone(), baseline));
                         egui::CollapsingHeader::new(&label)
                             .id_salt(entity)
                             .default_open(true)
@@ -116,9 +121,15 @@ fn inspector_panel(
                 .include_y(1.0)
                 .x_axis_label("s")
                 .show(ui, |plot| {
-                    for (entity, label) in &names {
+                    for (entity, label, baseline) in &names {
                         if let Some(series) = history.series.get(entity) {
-                            plot.line(Line::new(label.clone(), series.clone()));
+                            // Blue for the baseline, red for impulses, as in the examples.
+                            let colour = if *baseline {
+                                egui::Color32::from_rgb(90, 130, 240)
+                            } else {
+                                egui::Color32::from_rgb(230, 70, 90)
+                            };
+                            plot.line(Line::new(label.clone(), series.clone()).color(colour));
                         }
                     }
                 });

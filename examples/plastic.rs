@@ -1,0 +1,15 @@
+//! The paper's "Plastic" scene in a window, with the paper's method and the detailed surface.
+//! Controls are listed on screen; `--screenshot PATH --frames N` saves a picture and exits.
+
+mod common;
+
+use bevy::prelude::*;
+use bevy_soft_body::scenes::PaperScene;
+
+fn main() -> AppExit {
+    common::example_app(
+        "bevy_soft_body: Plastic",
+        Some(common::Layout::Single(PaperScene::Plastic)),
+    )
+    .run()
+}
