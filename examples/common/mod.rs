@@ -107,6 +107,10 @@ impl OrbitCamera {
 #[derive(Component)]
 pub struct SceneMember;
 
+/// Set to respawn the layout's scene at the next update (what R does).
+#[derive(Resource, Default)]
+pub struct ResetScene(pub bool);
+
 /// A pending single step.
 #[derive(Resource, Default)]
 struct StepOnce(bool);
@@ -145,6 +149,7 @@ pub fn example_app(title: &str, layout: Option<Layout>) -> App {
         ..default()
     })
     .init_resource::<StepOnce>()
+    .init_resource::<ResetScene>()
     .init_resource::<FrameCount>()
     .init_resource::<ExtraHelp>()
     .add_systems(Startup, (setup_world, setup_help))
@@ -318,6 +323,7 @@ pub fn despawn_scene(
 
 fn reset_layout(
     keys: Res<ButtonInput<KeyCode>>,
+    mut reset: ResMut<ResetScene>,
     mut commands: Commands,
     members: Query<
         Entity,
@@ -334,7 +340,8 @@ fn reset_layout(
     materials: ResMut<Assets<StandardMaterial>>,
     camera: Query<(&mut OrbitCamera, &mut Transform)>,
 ) {
-    if keys.just_pressed(KeyCode::KeyR) {
+    if keys.just_pressed(KeyCode::KeyR) || reset.0 {
+        reset.0 = false;
         despawn_scene(&mut commands, &members);
         spawn_layout(commands, layout, meshes, materials, camera);
     }
