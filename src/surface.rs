@@ -195,7 +195,7 @@ fn deform_surfaces(
             continue;
         };
         for (v, &p) in vertices.iter_mut().zip(points.iter()) {
-            let local = Vec3::from(to_local.transform_point3(p));
+            let local = to_local.transform_point3(p);
             lo = lo.min(local);
             hi = hi.max(local);
             *v = local.to_array();

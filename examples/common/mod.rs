@@ -302,39 +302,33 @@ fn spawn_layout(
     }
 }
 
+/// Everything a scene spawns: bodies, spheres, colliders, drivers, and what the examples add.
+pub type SceneEntities<'w, 's> = Query<
+    'w,
+    's,
+    Entity,
+    Or<(
+        With<SceneMember>,
+        With<SoftBody>,
+        With<RigidSphere>,
+        With<StaticCollider>,
+        With<bevy_soft_body::scenes::TwistDriver>,
+    )>,
+>;
+
 /// Despawns everything a scene spawned (bodies, spheres, colliders, drivers).
-pub fn despawn_scene(
-    commands: &mut Commands,
-    members: &Query<
-        Entity,
-        Or<(
-            With<SceneMember>,
-            With<SoftBody>,
-            With<RigidSphere>,
-            With<StaticCollider>,
-            With<bevy_soft_body::scenes::TwistDriver>,
-        )>,
-    >,
-) {
+pub fn despawn_scene(commands: &mut Commands, members: &SceneEntities<'_, '_>) {
     for entity in members {
         commands.entity(entity).despawn();
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn reset_layout(
     keys: Res<ButtonInput<KeyCode>>,
     mut reset: ResMut<ResetScene>,
     mut commands: Commands,
-    members: Query<
-        Entity,
-        Or<(
-            With<SceneMember>,
-            With<SoftBody>,
-            With<RigidSphere>,
-            With<StaticCollider>,
-            With<bevy_soft_body::scenes::TwistDriver>,
-        )>,
-    >,
+    members: SceneEntities<'_, '_>,
     layout: Res<Layout>,
     meshes: ResMut<Assets<Mesh>>,
     materials: ResMut<Assets<StandardMaterial>>,
