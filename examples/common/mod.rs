@@ -26,8 +26,10 @@ pub struct ExampleOptions {
     /// Frames before the screenshot. With `--screenshot`, each frame is exactly one 10 ms step,
     /// so the picture does not depend on how fast the machine renders.
     pub frames: u32,
-    /// `--scene NAME` for the playground.
+    /// `--scene NAME` for the playground and compare.
     pub scene: Option<PaperScene>,
+    /// `--gizmos`: start with the debug gizmos on.
+    pub gizmos: bool,
 }
 
 impl ExampleOptions {
@@ -54,6 +56,7 @@ impl ExampleOptions {
                         std::process::exit(2)
                     })
                 }
+                "--gizmos" => options.gizmos = true,
                 "--scene" => {
                     let name = value("--scene");
                     options.scene = Some(PaperScene::from_name(&name).unwrap_or_else(|| {
@@ -63,7 +66,7 @@ impl ExampleOptions {
                 }
                 other => {
                     eprintln!(
-                        "unknown argument {other}; use --screenshot PATH --frames N [--scene NAME]"
+                        "unknown argument {other}; use [--screenshot PATH --frames N] [--scene NAME] [--gizmos]"
                     );
                     std::process::exit(2)
                 }
@@ -175,6 +178,12 @@ pub fn example_app(title: &str, layout: Option<Layout>) -> App {
         app.insert_resource(layout)
             .add_systems(Startup, spawn_layout.after(setup_world))
             .add_systems(Update, reset_layout);
+    }
+    if options.gizmos {
+        app.insert_resource(SoftBodyDebugGizmos {
+            enabled: true,
+            ..default()
+        });
     }
     app.insert_resource(options);
     app
