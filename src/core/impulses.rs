@@ -89,13 +89,20 @@ pub(crate) struct ClampBounds {
     max_moved: f32,
     /// Previews at the start of the pass: a particle's drift is its distance from here.
     start: Vec<Vec3>,
+    /// Each particle's drift so far in the pass, kept up to date by `note_move`.
+    drift: Vec<f32>,
+    /// During a clamp walk, the length of each particle's direction (zero for particles the
+    /// impulse does not move), so the walk reads one number per vertex.
+    move_len: Vec<f32>,
 }
 
 impl ClampBounds {
     /// Records that particle `i`'s preview is now at `preview`.
     #[inline]
     pub(crate) fn note_move(&mut self, i: usize, preview: Vec3) {
-        self.max_moved = self.max_moved.max((preview - self.start[i]).length());
+        let drift = (preview - self.start[i]).length();
+        self.drift[i] = drift;
+        self.max_moved = self.max_moved.max(drift);
     }
 }
 
@@ -265,8 +272,10 @@ impl SoftBodyState {
                 .map(|&i| self.scratch[i as usize].length_squared())
                 .fold(0.0f32, f32::max);
             if let Some(drift) = self.clamp_drift(p, vertices, step as f32 * largest.sqrt()) {
+                self.set_move_lengths(vertices, true);
                 step =
                     self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step, drift);
+                self.set_move_lengths(vertices, false);
             } else {
                 self.counters.clamps_skipped += 1;
             }
@@ -332,11 +341,13 @@ impl SoftBodyState {
                 for k in 0..4 {
                     self.scratch[tet[k] as usize] = d[k];
                 }
+                self.set_move_lengths(&tet, true);
                 step = self.neighbour_clamp(
                     std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
                     step,
                     drift,
                 );
+                self.set_move_lengths(&tet, false);
                 for &i in &tet {
                     self.scratch[i as usize] = Vec3::ZERO;
                 }
@@ -427,6 +438,9 @@ impl SoftBodyState {
         b.start.clear();
         b.start.extend_from_slice(&self.previews);
         b.max_moved = 0.0;
+        b.drift.clear();
+        b.drift.resize(self.previews.len(), 0.0);
+        b.move_len.resize(self.previews.len(), 0.0);
         b.active = true;
     }
 
@@ -451,9 +465,8 @@ impl SoftBodyState {
         let drift = vertices
             .iter()
             .flat_map(|&v| mesh.ring_vertices(v as usize))
-            .map(|&i| (self.previews[i as usize] - b.start[i as usize]).length_squared())
-            .fold(0.0f32, f32::max)
-            .sqrt();
+            .map(|&i| b.drift[i as usize])
+            .fold(0.0f32, f32::max);
         (volume_bound(2.0 * (drift + largest_move), reach) >= slack).then_some(drift)
     }
 
@@ -473,18 +486,29 @@ impl SoftBodyState {
         let b = &self.clamp_bounds;
         for &t in tets {
             let tet = mesh.tets()[t as usize];
-            let max_move = tet
-                .iter()
-                .map(|&i| self.scratch[i as usize].length_squared())
-                .fold(0.0f32, f32::max)
-                .sqrt();
+            let max_move = if b.active {
+                tet.iter()
+                    .map(|&i| b.move_len[i as usize])
+                    .fold(0.0f32, f32::max)
+            } else {
+                tet.iter()
+                    .map(|&i| self.scratch[i as usize].length_squared())
+                    .fold(0.0f32, f32::max)
+                    .sqrt()
+            };
             if max_move == 0.0 {
                 continue;
             }
-            // This tet alone, against its own start-of-pass bounds (see [`ClampBounds`]).
+            // This tet alone, against its own start-of-pass bounds (see [`ClampBounds`]), with
+            // the drift of its own four particles: far tighter than the region's largest.
             if b.active {
                 let t = t as usize;
-                if volume_bound(2.0 * (drift + step as f32 * max_move), b.tet_reach[t])
+                let own_drift = tet
+                    .iter()
+                    .map(|&i| b.drift[i as usize])
+                    .fold(0.0f32, f32::max)
+                    .min(drift);
+                if volume_bound(2.0 * (own_drift + step as f32 * max_move), b.tet_reach[t])
                     < b.tet_slack[t]
                 {
                     continue;
@@ -524,6 +548,17 @@ impl SoftBodyState {
             }
         }
         step
+    }
+
+    /// Records (`set`) or clears the lengths of the directions of `vertices` for a clamp walk.
+    fn set_move_lengths(&mut self, vertices: &[u32], set: bool) {
+        if !self.clamp_bounds.active {
+            return;
+        }
+        for &i in vertices {
+            let i = i as usize;
+            self.clamp_bounds.move_len[i] = if set { self.scratch[i].length() } else { 0.0 };
+        }
     }
 
     fn clear_directions(&mut self, vertices: &[u32]) {
