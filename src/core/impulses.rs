@@ -460,14 +460,24 @@ impl SoftBodyState {
         if volume_bound(2.0 * (b.max_moved + largest_move), reach) < slack {
             return None;
         }
-        // Every particle of the region is a ring vertex of one of the region's vertices.
+        // Then one vertex at a time: every tet the impulse touches is in the one-ring of one of
+        // `vertices`, and its particles are ring vertices of that vertex; so if each vertex's
+        // one-ring is safe with the drift of its own ring vertices, all of them are.
         let mesh = &self.mesh;
-        let drift = vertices
-            .iter()
-            .flat_map(|&v| mesh.ring_vertices(v as usize))
-            .map(|&i| b.drift[i as usize])
-            .fold(0.0f32, f32::max);
-        (volume_bound(2.0 * (drift + largest_move), reach) >= slack).then_some(drift)
+        let mut region_drift = 0.0f32;
+        let mut safe = true;
+        for &v in vertices {
+            let v = v as usize;
+            let drift = mesh
+                .ring_vertices(v)
+                .iter()
+                .map(|&i| b.drift[i as usize])
+                .fold(0.0f32, f32::max);
+            region_drift = region_drift.max(drift);
+            safe &=
+                volume_bound(2.0 * (drift + largest_move), b.vertex_reach[v]) < b.vertex_slack[v];
+        }
+        (!safe).then_some(region_drift)
     }
 
     /// The neighbour clamp: the largest `s' <= step` such that every tet in `tets` keeps at
