@@ -2,7 +2,7 @@
 //! a headless app, and writes the paper's Figure 2 and the numbers behind it.
 //!
 //! ```text
-//! cargo run --release --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--verbose]
+//! cargo run --release --all-features --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--verbose]
 //! ```
 //! writes `DIR/summary.csv`, `DIR/<scene>.csv` (time series) and `DIR/volume_error.png`, and
 //! prints the summary table.
