@@ -8,8 +8,8 @@ use bevy_soft_body::core::{VolumeMethod, box_grid, subdivided_box};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::surface_mesh;
 
-#[test]
-fn surface_vertices_are_the_barycentric_combination_of_their_tets_particles() {
+/// `MinimalPlugins` with assets, meshes, the simulation and the surfaces.
+fn surface_app() -> App {
     let mut app = App::new();
     app.add_plugins((
         MinimalPlugins,
@@ -17,9 +17,15 @@ fn surface_vertices_are_the_barycentric_combination_of_their_tets_particles() {
         MeshPlugin,
         SoftBodyPlugin::default(),
         SoftBodySurfacePlugin,
-    ))
+    ));
+    app
+}
+
+#[test]
+fn surface_vertices_are_the_barycentric_combination_of_their_tets_particles() {
+    let mut app = surface_app();
     // Frames of 7 ms against 10 ms steps: most frames fall between two steps.
-    .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+    app.insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
         std::time::Duration::from_millis(7),
     ))
     .insert_resource(SoftBodyGravity(Vec3::new(0.0, -9.81, 0.0)));
@@ -108,14 +114,7 @@ fn surface_vertices_are_the_barycentric_combination_of_their_tets_particles() {
 
 #[test]
 fn a_surface_without_a_body_is_reported_not_a_panic() {
-    let mut app = App::new();
-    app.add_plugins((
-        MinimalPlugins,
-        AssetPlugin::default(),
-        MeshPlugin,
-        SoftBodyPlugin::default(),
-        SoftBodySurfacePlugin,
-    ));
+    let mut app = surface_app();
     let mesh = app
         .world_mut()
         .resource_mut::<Assets<Mesh>>()
