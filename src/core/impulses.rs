@@ -15,6 +15,7 @@
 //!   its target ([`monotone_root`]). The summed ring directions can point away from the ring's
 //!   target (its tets disagree), and then the cubic's positive roots lie past a turning point,
 //!   millions of times further than any sensible step: such a ring is left alone.
+//! - Tets and rings within `ImpulseSettings::tolerance` of their rest volume get no impulse.
 //! - Cubic without such a root: no impulse (counted in [`StepCounters`]); the next step
 //!   tries again from new positions. Forcing a step there could only overshoot.
 //! - All directions zero (ring at rest volume, or all its particles kinematic): skipped.
@@ -67,8 +68,10 @@ pub enum ImpulseOutcome {
 /// when `volume_bound(2 (drift + m), region_reach)` is below `region_slack`, the smallest slack
 /// above the floor in the region at the start of the pass; then the clamp's answer is known (no
 /// shortening) and its walk over the neighbours is skipped. `drift` is first the largest drift
-/// seen in the whole pass (free to check), then, if that is not enough, the largest among the
-/// region's own particles. A tet already below `eps` at the start gets as slack half of
+/// seen in the whole pass (free to check); if that is not enough, the region is checked one
+/// impulse vertex at a time, each vertex's one-ring against its own slack and reach with the
+/// largest drift among its ring vertices; and in a walk, each tet against its own bounds with
+/// the drift of its own four particles. A tet already below `eps` at the start gets as slack half of
 /// `CLAMP_SLACK` (the drift before an impulse and the impulse itself each count once), and no more
 /// than its distance to `eps`, so that it cannot climb above `eps` unseen, where the exact rule
 /// would no longer let it drop.
