@@ -61,11 +61,12 @@ pub enum ImpulseOutcome {
 /// clamp without looking at their neighbours.
 ///
 /// Every tet's volume can change from its value at the start of the pass only through the
-/// motion of its vertices; if each edge vector moves by at most `delta`, the volume moves by at
-/// most `volume_bound(delta, L)` with `L` the tet's longest edge from its last vertex. A
+/// motion of its vertices; if each of them moves by at most `m` from where it was at the start,
+/// the volume moves by at most `drift_bound(m, G, L)`, with `G` the sum of the lengths of the
+/// tet's volume gradients and `L` its longest edge from its last vertex, both at the start. A
 /// particle's drift is the distance of its preview from where it was at the start of the pass.
 /// An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its floor
-/// when `volume_bound(2 (drift + m), region_reach)` is below `region_slack`, the smallest slack
+/// when `drift_bound(drift + m, region_grad, region_reach)` is below `region_slack`, the smallest slack
 /// above the floor in the region at the start of the pass; then the clamp's answer is known (no
 /// shortening) and its walk over the neighbours is skipped. `drift` is first the largest drift
 /// seen in the whole pass (free to check); if that is not enough, the region is checked one
@@ -82,10 +83,13 @@ pub(crate) struct ClampBounds {
     /// Never use the bounds (to compare against the exact walk in tests).
     pub(crate) disabled: bool,
     tet_slack: Vec<f32>,
+    tet_grad: Vec<f32>,
     tet_reach: Vec<f32>,
     vertex_slack: Vec<f32>,
+    vertex_grad: Vec<f32>,
     vertex_reach: Vec<f32>,
     region_slack: Vec<f32>,
+    region_grad: Vec<f32>,
     region_reach: Vec<f32>,
     /// The largest drift any particle has had in this pass (drifts can shrink again; this
     /// cannot, so it bounds every particle's drift now).
@@ -114,6 +118,20 @@ impl ClampBounds {
 #[inline]
 fn volume_bound(delta: f32, l: f32) -> f32 {
     (3.0 * delta * l * l + 3.0 * delta * delta * l + delta * delta * delta) / 6.0
+}
+
+/// Largest change of a tet's volume when each of its particles moves by at most `m`, given the
+/// sum `grad` of the lengths of its four volume gradients and its longest edge `l` from its last
+/// vertex, both before the move.
+///
+/// The volume is a cubic in the moves: its first-order term is exactly `sum_i grad_i . dx_i`,
+/// at most `m * grad`; the edge vectors change by at most `2 m`, so the second- and third-order
+/// terms are at most those of [`volume_bound`]. Tighter than `volume_bound(2 m, l)` alone by a
+/// factor of about two to three for well-shaped tets (`grad` is about `0.6 l^2` for them), which
+/// lets that many more impulses skip the clamp walk.
+#[inline]
+fn drift_bound(m: f32, grad: f32, l: f32) -> f32 {
+    m * grad + 2.0 * l * m * m + (4.0 / 3.0) * m * m * m
 }
 
 /// Which clamp regions a pass uses.
@@ -388,10 +406,12 @@ impl SoftBodyState {
         let mesh = self.mesh.clone();
         let b = &mut self.clamp_bounds;
         b.tet_slack.resize(mesh.tet_count(), 0.0);
+        b.tet_grad.resize(mesh.tet_count(), 0.0);
         b.tet_reach.resize(mesh.tet_count(), 0.0);
         for (t, (tet, &v0)) in mesh.tets().iter().zip(mesh.rest_volumes()).enumerate() {
             let xp = tet.map(|i| self.previews[i as usize]);
-            let volume = signed_volume(&xp);
+            let g = volume_gradients(&xp);
+            let volume = (xp[0] - xp[3]).dot(g[0]);
             let eps = CLAMP_FRACTION * v0;
             // A tet below eps may lose half the slack over the pass, and must not get back above
             // eps within the bound either: above eps, the exact rule would hold it there.
@@ -400,6 +420,7 @@ impl SoftBodyState {
             } else {
                 (0.5 * CLAMP_SLACK * v0).min(eps - volume)
             };
+            b.tet_grad[t] = g.iter().map(|g| g.length()).sum();
             b.tet_reach[t] = (xp[0] - xp[3])
                 .length()
                 .max((xp[1] - xp[3]).length())
@@ -409,14 +430,17 @@ impl SoftBodyState {
         // its ring vertices, a tet and its neighbours the one-rings of its four vertices. So the
         // region bounds are extremes over per-vertex extremes, which costs a few reads each.
         b.vertex_slack.resize(mesh.vertex_count(), 0.0);
+        b.vertex_grad.resize(mesh.vertex_count(), 0.0);
         b.vertex_reach.resize(mesh.vertex_count(), 0.0);
         for v in 0..mesh.vertex_count() {
-            let (mut slack, mut reach) = (f32::INFINITY, 0.0f32);
+            let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
             for &t in mesh.one_ring(v) {
                 slack = slack.min(b.tet_slack[t as usize]);
+                grad = grad.max(b.tet_grad[t as usize]);
                 reach = reach.max(b.tet_reach[t as usize]);
             }
             b.vertex_slack[v] = slack;
+            b.vertex_grad[v] = grad;
             b.vertex_reach[v] = reach;
         }
         let count = match regions {
@@ -424,18 +448,21 @@ impl SoftBodyState {
             ClampRegions::Tets => mesh.tet_count(),
         };
         b.region_slack.resize(count, 0.0);
+        b.region_grad.resize(count, 0.0);
         b.region_reach.resize(count, 0.0);
         for r in 0..count {
             let vertices: &[u32] = match regions {
                 ClampRegions::Rings => mesh.ring_vertices(r),
                 ClampRegions::Tets => &mesh.tets()[r],
             };
-            let (mut slack, mut reach) = (f32::INFINITY, 0.0f32);
+            let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
             for &v in vertices {
                 slack = slack.min(b.vertex_slack[v as usize]);
+                grad = grad.max(b.vertex_grad[v as usize]);
                 reach = reach.max(b.vertex_reach[v as usize]);
             }
             b.region_slack[r] = slack;
+            b.region_grad[r] = grad;
             b.region_reach[r] = reach;
         }
         b.start.clear();
@@ -459,8 +486,12 @@ impl SoftBodyState {
         if !b.active {
             return Some(f32::INFINITY);
         }
-        let (reach, slack) = (b.region_reach[region], b.region_slack[region]);
-        if volume_bound(2.0 * (b.max_moved + largest_move), reach) < slack {
+        let (grad, reach, slack) = (
+            b.region_grad[region],
+            b.region_reach[region],
+            b.region_slack[region],
+        );
+        if drift_bound(b.max_moved + largest_move, grad, reach) < slack {
             return None;
         }
         // Then one vertex at a time: every tet the impulse touches is in the one-ring of one of
@@ -477,8 +508,8 @@ impl SoftBodyState {
                 .map(|&i| b.drift[i as usize])
                 .fold(0.0f32, f32::max);
             region_drift = region_drift.max(drift);
-            safe &=
-                volume_bound(2.0 * (drift + largest_move), b.vertex_reach[v]) < b.vertex_slack[v];
+            safe &= drift_bound(drift + largest_move, b.vertex_grad[v], b.vertex_reach[v])
+                < b.vertex_slack[v];
         }
         (!safe).then_some(region_drift)
     }
@@ -521,8 +552,11 @@ impl SoftBodyState {
                     .map(|&i| b.drift[i as usize])
                     .fold(0.0f32, f32::max)
                     .min(drift);
-                if volume_bound(2.0 * (own_drift + step as f32 * max_move), b.tet_reach[t])
-                    < b.tet_slack[t]
+                if drift_bound(
+                    own_drift + step as f32 * max_move,
+                    b.tet_grad[t],
+                    b.tet_reach[t],
+                ) < b.tet_slack[t]
                 {
                     continue;
                 }
@@ -809,6 +843,53 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The bounds the clamp shortcuts rely on hold for arbitrary tets, including flat and
+    /// inverted ones, and moves up to and beyond the tet's size.
+    #[test]
+    fn drift_bound_bounds_every_volume_change() {
+        let mut seed = 99u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 40) as f32) / ((1u64 << 24) as f32) * 2.0 - 1.0
+        };
+        let mut tightest = 0.0f32;
+        for case in 0..20_000 {
+            let scale = [0.01, 1.0, 30.0][case % 3];
+            let xp: [Vec3; 4] = std::array::from_fn(|_| Vec3::new(next(), next(), next()) * scale);
+            let m = scale * [0.001, 0.05, 0.5, 2.0][case % 4] * next().abs();
+            let g = volume_gradients(&xp);
+            // Every other case moves each particle its full `m` along its gradient (the worst
+            // case to first order), the others in random directions by random amounts.
+            let sign = next().signum();
+            let moved: [Vec3; 4] = std::array::from_fn(|k| {
+                if case % 2 == 0 {
+                    xp[k] + g[k].normalize_or_zero() * m * sign
+                } else {
+                    let dir = Vec3::new(next(), next(), next()).normalize_or_zero();
+                    xp[k] + dir * m * next().abs()
+                }
+            });
+            let grad: f32 = g.iter().map(|g| g.length()).sum();
+            let reach = (0..3).map(|k| (xp[k] - xp[3]).length()).fold(0.0, f32::max);
+            let change = (signed_volume(&moved) - signed_volume(&xp)).abs();
+            let bound = drift_bound(m, grad, reach);
+            // f32 rounding of the two volumes, relative to the tet's own size.
+            let rounding = 1e-5 * (reach + m).powi(3);
+            assert!(
+                change <= bound + rounding,
+                "case {case}: change {change} > bound {bound}"
+            );
+            assert!(bound <= volume_bound(2.0 * m, reach) * 1.0001 + rounding);
+            if bound > 0.0 {
+                tightest = tightest.max(change / bound);
+            }
+        }
+        // The bound is not vacuous: moves along the gradients reach it to first order.
+        assert!(tightest > 0.9, "tightest ratio {tightest}");
     }
 
     #[test]
