@@ -315,7 +315,7 @@ impl SoftBodyState {
     /// Adds `dv` to particle `i`'s velocity; if `i` is pressed against a sphere and `dv` pushes
     /// into it, the sphere moves along with the particle (the push was already reduced to the
     /// pair's share by `constrain_direction`), so momentum is conserved.
-    #[inline]
+    #[inline(always)]
     pub(crate) fn apply_velocity_change(
         &mut self,
         i: usize,

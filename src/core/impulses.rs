@@ -109,8 +109,21 @@ impl ClampBounds {
     pub(crate) fn note_move(&mut self, i: usize, preview: Vec3) {
         let drift = (preview - self.start[i]).length();
         self.drift[i] = drift;
-        self.max_moved = self.max_moved.max(drift);
+        self.max_moved = larger(self.max_moved, drift);
     }
+}
+
+/// `max(a, b)` as one instruction (`f32::max`'s NaN rules cost several in the hot gathers).
+/// A NaN `b` is ignored; the bounds guard against broken previews through the slack instead.
+#[inline(always)]
+fn larger(a: f32, b: f32) -> f32 {
+    if b > a { b } else { a }
+}
+
+/// `min(a, b)` as one instruction; see [`larger`].
+#[inline(always)]
+fn smaller(a: f32, b: f32) -> f32 {
+    if b < a { b } else { a }
 }
 
 /// Largest change of a tet's volume when each of its edge vectors (from its last vertex, of
@@ -231,7 +244,8 @@ impl SoftBodyState {
         let mut rest = 0.0f64;
         let mut any = false;
         let mut outside_tolerance = false;
-        let mut tet_step = f64::INFINITY;
+        // The stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
+        let mut stiffest = 0.0f32;
         for (slot, &t) in ring.iter().enumerate() {
             let tet = mesh.tets()[t as usize];
             let xp = tet.map(|i| self.preview(i));
@@ -246,19 +260,18 @@ impl SoftBodyState {
             if c == 0.0 {
                 continue;
             }
-            let stiffness: f32 = (0..4)
-                .map(|k| self.inv_masses[tet[k] as usize] * g[k].length_squared())
-                .sum();
-            if stiffness > 0.0 {
-                tet_step = tet_step.min(1.0 / stiffness as f64);
-            }
+            let mut stiffness = 0.0f32;
             for k in 0..4 {
                 let i = tet[k] as usize;
-                let d = -self.inv_masses[i] * c * g[k];
+                let w = self.inv_masses[i];
+                stiffness += w * g[k].length_squared();
+                let d = -w * c * g[k];
                 self.scratch[i] += d;
                 any |= d != Vec3::ZERO;
             }
+            stiffest = stiffest.max(stiffness);
         }
+        let tet_step = 1.0 / stiffest as f64;
         if !any || !outside_tolerance {
             self.clear_directions(vertices);
             return ImpulseOutcome::Skipped;
@@ -291,7 +304,7 @@ impl SoftBodyState {
             let largest = vertices
                 .iter()
                 .map(|&i| self.scratch[i as usize].length_squared())
-                .fold(0.0f32, f32::max);
+                .fold(0.0f32, larger);
             if let Some(drift) = self.clamp_drift(p, vertices, step as f32 * largest.sqrt()) {
                 self.set_move_lengths(vertices, true);
                 step =
@@ -357,7 +370,7 @@ impl SoftBodyState {
         let full = gamma * root;
         let mut step = full;
         if clamp {
-            let largest = d.iter().map(|x| x.length_squared()).fold(0.0f32, f32::max);
+            let largest = d.iter().map(|x| x.length_squared()).fold(0.0f32, larger);
             if let Some(drift) = self.clamp_drift(t, &tet, step as f32 * largest.sqrt()) {
                 for k in 0..4 {
                     self.scratch[tet[k] as usize] = d[k];
@@ -417,14 +430,18 @@ impl SoftBodyState {
             // eps within the bound either: above eps, the exact rule would hold it there.
             b.tet_slack[t] = if volume >= eps {
                 volume - eps
-            } else {
+            } else if volume.is_finite() {
                 (0.5 * CLAMP_SLACK * v0).min(eps - volume)
+            } else {
+                // A broken preview: no bound is safe; every region holding it walks.
+                f32::NEG_INFINITY
             };
             b.tet_grad[t] = g.iter().map(|g| g.length()).sum();
             b.tet_reach[t] = (xp[0] - xp[3])
-                .length()
-                .max((xp[1] - xp[3]).length())
-                .max((xp[2] - xp[3]).length());
+                .length_squared()
+                .max((xp[1] - xp[3]).length_squared())
+                .max((xp[2] - xp[3]).length_squared())
+                .sqrt();
         }
         // A region is a union of one-rings: a ring's tets and border tets are the one-rings of
         // its ring vertices, a tet and its neighbours the one-rings of its four vertices. So the
@@ -435,9 +452,9 @@ impl SoftBodyState {
         for v in 0..mesh.vertex_count() {
             let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
             for &t in mesh.one_ring(v) {
-                slack = slack.min(b.tet_slack[t as usize]);
-                grad = grad.max(b.tet_grad[t as usize]);
-                reach = reach.max(b.tet_reach[t as usize]);
+                slack = smaller(slack, b.tet_slack[t as usize]);
+                grad = larger(grad, b.tet_grad[t as usize]);
+                reach = larger(reach, b.tet_reach[t as usize]);
             }
             b.vertex_slack[v] = slack;
             b.vertex_grad[v] = grad;
@@ -457,9 +474,9 @@ impl SoftBodyState {
             };
             let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
             for &v in vertices {
-                slack = slack.min(b.vertex_slack[v as usize]);
-                grad = grad.max(b.vertex_grad[v as usize]);
-                reach = reach.max(b.vertex_reach[v as usize]);
+                slack = smaller(slack, b.vertex_slack[v as usize]);
+                grad = larger(grad, b.vertex_grad[v as usize]);
+                reach = larger(reach, b.vertex_reach[v as usize]);
             }
             b.region_slack[r] = slack;
             b.region_grad[r] = grad;
@@ -506,8 +523,8 @@ impl SoftBodyState {
                 .ring_vertices(v)
                 .iter()
                 .map(|&i| b.drift[i as usize])
-                .fold(0.0f32, f32::max);
-            region_drift = region_drift.max(drift);
+                .fold(0.0f32, larger);
+            region_drift = larger(region_drift, drift);
             safe &= drift_bound(drift + largest_move, b.vertex_grad[v], b.vertex_reach[v])
                 < b.vertex_slack[v];
         }
@@ -533,11 +550,11 @@ impl SoftBodyState {
             let max_move = if b.active {
                 tet.iter()
                     .map(|&i| b.move_len[i as usize])
-                    .fold(0.0f32, f32::max)
+                    .fold(0.0f32, larger)
             } else {
                 tet.iter()
                     .map(|&i| self.scratch[i as usize].length_squared())
-                    .fold(0.0f32, f32::max)
+                    .fold(0.0f32, larger)
                     .sqrt()
             };
             if max_move == 0.0 {
@@ -550,7 +567,7 @@ impl SoftBodyState {
                 let own_drift = tet
                     .iter()
                     .map(|&i| b.drift[i as usize])
-                    .fold(0.0f32, f32::max)
+                    .fold(0.0f32, larger)
                     .min(drift);
                 if drift_bound(
                     own_drift + step as f32 * max_move,
