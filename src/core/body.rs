@@ -107,10 +107,23 @@ pub struct SoftBodyState {
     pub(crate) contact_sphere: Vec<u32>,
     /// The particles with a non-zero entry in `contact_normals`, to clear them cheaply.
     pub(crate) touching: Vec<u32>,
-    /// The volume and gradients of each tet of the one-ring being corrected, so that its
-    /// polynomial need not compute them again; as long as the largest one-ring.
-    pub(crate) ring_tets: Vec<(f32, [Vec3; 4])>,
+    /// What the ring impulse being computed knows of each tet of its one-ring, so that its
+    /// polynomial need not compute it again; as long as the largest one-ring.
+    pub(crate) ring_tets: Vec<RingTet>,
     pub(crate) counters: StepCounters,
+}
+
+/// One tet of the one-ring being corrected, at the current previews.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct RingTet {
+    /// Its signed volume.
+    pub(crate) volume: f32,
+    /// Its volume error `C_t`.
+    pub(crate) error: f32,
+    /// Its volume gradients.
+    pub(crate) gradients: [Vec3; 4],
+    /// Its edge vectors `x_i - x_d`, i = a, b, c.
+    pub(crate) edges: [Vec3; 3],
 }
 
 impl SoftBodyState {
@@ -142,7 +155,7 @@ impl SoftBodyState {
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::new(),
             ring_tets: vec![
-                (0.0, [Vec3::ZERO; 4]);
+                RingTet::default();
                 (0..n).map(|v| mesh.one_ring(v).len()).max().unwrap_or(0)
             ],
             counters: StepCounters::default(),

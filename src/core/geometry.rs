@@ -64,7 +64,19 @@ pub fn volume_polynomial_with_gradients(
     g: &[Vec3; 4],
     d: &[Vec3; 4],
 ) -> Cubic {
-    let (ea, eb, ec) = (p[0] - p[3], p[1] - p[3], p[2] - p[3]);
+    volume_polynomial_with_edges(&[p[0] - p[3], p[1] - p[3], p[2] - p[3]], volume, g, d)
+}
+
+/// [`volume_polynomial_with_gradients`] given the tet's edge vectors `p_i - p_d` (i = a, b, c)
+/// instead of its positions, for callers that kept them.
+#[inline]
+pub fn volume_polynomial_with_edges(
+    e: &[Vec3; 3],
+    volume: f32,
+    g: &[Vec3; 4],
+    d: &[Vec3; 4],
+) -> Cubic {
+    let [ea, eb, ec] = *e;
     let (fa, fb, fc) = (d[0] - d[3], d[1] - d[3], d[2] - d[3]);
     let c1 = g[0].dot(fa) + g[1].dot(fb) + g[2].dot(fc);
     let fbc = fb.cross(fc);

@@ -30,10 +30,11 @@
 
 use glam::Vec3;
 
-use super::body::SoftBodyState;
+use super::body::{RingTet, SoftBodyState};
 use super::contacts::RigidSphereState;
 use super::geometry::{
-    signed_volume, volume_gradients, volume_polynomial, volume_polynomial_with_gradients,
+    signed_volume, volume_gradients, volume_polynomial, volume_polynomial_with_edges,
+    volume_polynomial_with_gradients,
 };
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::roots::{Cubic, first_crossing, monotone_root};
@@ -244,22 +245,41 @@ impl SoftBodyState {
         let mut rest = 0.0f64;
         let mut any = false;
         let mut outside_tolerance = false;
-        // The stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
-        let mut stiffest = 0.0f32;
         for (slot, &t) in ring.iter().enumerate() {
             let tet = mesh.tets()[t as usize];
             let xp = tet.map(|i| self.preview(i));
             let v0 = mesh.rest_volumes()[t as usize];
             rest += v0 as f64;
             let g = volume_gradients(&xp);
+            let edges = [xp[0] - xp[3], xp[1] - xp[3], xp[2] - xp[3]];
             // The volume from the gradient already at hand: `ga = eb x ec / 6`.
-            let volume = (xp[0] - xp[3]).dot(g[0]);
-            self.ring_tets[slot] = (volume, g);
-            let c = volume - v0;
-            outside_tolerance |= c.abs() > tolerance * v0;
+            let volume = edges[0].dot(g[0]);
+            let error = volume - v0;
+            outside_tolerance |= error.abs() > tolerance * v0;
+            self.ring_tets[slot] = RingTet {
+                volume,
+                error,
+                gradients: g,
+                edges,
+            };
+        }
+        // Most rings of a body near rest are within tolerance: they stop here, before any
+        // direction is written.
+        if !outside_tolerance {
+            return ImpulseOutcome::Skipped;
+        }
+        // The stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
+        let mut stiffest = 0.0f32;
+        for (slot, &t) in ring.iter().enumerate() {
+            let RingTet {
+                error: c,
+                gradients: g,
+                ..
+            } = self.ring_tets[slot];
             if c == 0.0 {
                 continue;
             }
+            let tet = mesh.tets()[t as usize];
             let mut stiffness = 0.0f32;
             for k in 0..4 {
                 let i = tet[k] as usize;
@@ -272,7 +292,7 @@ impl SoftBodyState {
             stiffest = stiffest.max(stiffness);
         }
         let tet_step = 1.0 / stiffest as f64;
-        if !any || !outside_tolerance {
+        if !any {
             self.clear_directions(vertices);
             return ImpulseOutcome::Skipped;
         }
@@ -285,10 +305,14 @@ impl SoftBodyState {
         let mut poly: Cubic = [-rest, 0.0, 0.0, 0.0];
         for (slot, &t) in ring.iter().enumerate() {
             let tet = mesh.tets()[t as usize];
-            let xp = tet.map(|i| self.preview(i));
             let d = tet.map(|i| self.scratch[i as usize]);
-            let (volume, g) = &self.ring_tets[slot];
-            let c = volume_polynomial_with_gradients(&xp, *volume, g, &d);
+            let RingTet {
+                volume,
+                gradients,
+                edges,
+                ..
+            } = &self.ring_tets[slot];
+            let c = volume_polynomial_with_edges(edges, *volume, gradients, &d);
             for k in 0..4 {
                 poly[k] += c[k];
             }
