@@ -34,6 +34,21 @@ pub fn volume_gradients(p: &[Vec3; 4]) -> [Vec3; 4] {
     [ga, gb, gc, -(ga + gb + gc)]
 }
 
+/// The smallest dihedral angle of the tet `p`, in degrees.
+pub fn min_dihedral_deg(p: &[Vec3; 4]) -> f32 {
+    let g = volume_gradients(p);
+    let mut smallest = 180.0f32;
+    // The face opposite vertex k has outward normal -g_k; the dihedral angle at the edge shared
+    // by the faces opposite k and l is pi minus the angle between those normals.
+    for k in 0..4 {
+        for l in k + 1..4 {
+            let cos = -g[k].normalize_or_zero().dot(g[l].normalize_or_zero());
+            smallest = smallest.min(cos.clamp(-1.0, 1.0).acos().to_degrees());
+        }
+    }
+    smallest
+}
+
 /// Coefficients of `V(s)`, the volume of the tet with vertices `p_i + s * d_i`.
 /// A vertex that does not move has `d_i = 0`, which lowers the degree as the paper describes.
 #[inline]

@@ -70,7 +70,7 @@ fn check(cells: UVec3, cell_size: Vec3) -> Result<(), GridError> {
 }
 
 /// Builds tets for the chosen cells of a grid, keeping only the vertices they use.
-fn build(
+pub(crate) fn grid_cells(
     cells: UVec3,
     cell_size: Vec3,
     min_corner: Vec3,
@@ -126,7 +126,7 @@ pub fn box_grid(cells: UVec3, cell_size: Vec3, min_corner: Vec3) -> Result<TetMe
             position: min_corner,
         }));
     }
-    build(cells, cell_size, min_corner, |_| true)
+    grid_cells(cells, cell_size, min_corner, |_| true)
 }
 
 /// A tet mesh of the cubic cells (edge `cell`) whose centre lies inside `sdf` (negative inside),
@@ -149,7 +149,7 @@ pub fn sdf_grid(
         .max(IVec3::ONE)
         .as_uvec3();
     check(cells, size)?;
-    build(cells, size, min, |c| {
+    grid_cells(cells, size, min, |c| {
         sdf(min + (c.as_vec3() + 0.5) * cell) < 0.0
     })
 }

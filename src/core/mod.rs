@@ -11,6 +11,8 @@ pub mod material;
 pub mod roots;
 pub mod surface_mesh;
 pub mod tet_mesh;
+pub mod tetrahedralize;
+pub mod winding;
 
 pub use body::{ParticleIndexError, SoftBodyState, StepCounters, VolumeMetrics};
 pub use contacts::{ColliderInstance, RigidSphereState};
@@ -18,5 +20,9 @@ pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::ImpulseOutcome;
 pub use material::{ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod};
-pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets};
+pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
 pub use tet_mesh::{TetMesh, TetMeshError};
+pub use tetrahedralize::{
+    Resolution, Tetrahedralization, TetrahedralizeError, face_components, tetrahedralize,
+};
+pub use winding::WindingNumber;

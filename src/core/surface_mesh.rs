@@ -167,6 +167,92 @@ pub fn surface_nets(
     surface
 }
 
+impl TriangleSurface {
+    /// Number of triangles.
+    pub fn triangle_count(&self) -> usize {
+        self.indices.len() / 3
+    }
+
+    /// The volume the surface encloses, by the divergence theorem: exact for a closed,
+    /// outward-oriented surface, meaningless for others. Accumulated in `f64`.
+    pub fn enclosed_volume(&self) -> f64 {
+        self.indices
+            .chunks_exact(3)
+            .filter_map(|t| {
+                let p = [0, 1, 2].map(|k| self.positions.get(t[k] as usize).copied());
+                let [Some(a), Some(b), Some(c)] = p else {
+                    return None;
+                };
+                Some(a.as_dvec3().dot(b.as_dvec3().cross(c.as_dvec3())) / 6.0)
+            })
+            .sum()
+    }
+}
+
+/// A closed, outward sphere of `radius` around `centre` with `segments` around and `rings`
+/// from pole to pole: `2 * segments * (rings - 1)` triangles. For tests, examples and
+/// benchmarks that need a round input of a chosen size.
+pub fn uv_sphere(centre: Vec3, radius: f32, segments: u32, rings: u32) -> TriangleSurface {
+    let (segments, rings) = (segments.max(3), rings.max(2));
+    let mut s = TriangleSurface::default();
+    s.positions.push(centre + Vec3::Y * radius);
+    for r in 1..rings {
+        let theta = std::f32::consts::PI * r as f32 / rings as f32;
+        for k in 0..segments {
+            let phi = std::f32::consts::TAU * k as f32 / segments as f32;
+            s.positions.push(
+                centre
+                    + radius
+                        * Vec3::new(
+                            theta.sin() * phi.cos(),
+                            theta.cos(),
+                            -theta.sin() * phi.sin(),
+                        ),
+            );
+        }
+    }
+    s.positions.push(centre - Vec3::Y * radius);
+    let south = s.positions.len() as u32 - 1;
+    let at = |r: u32, k: u32| 1 + (r - 1) * segments + k % segments;
+    for k in 0..segments {
+        s.indices.extend_from_slice(&[0, at(1, k), at(1, k + 1)]);
+        s.indices
+            .extend_from_slice(&[south, at(rings - 1, k + 1), at(rings - 1, k)]);
+    }
+    for r in 1..rings - 1 {
+        for k in 0..segments {
+            let (a, b, c, d) = (at(r, k), at(r + 1, k), at(r + 1, k + 1), at(r, k + 1));
+            s.indices.extend_from_slice(&[a, b, c, a, c, d]);
+        }
+    }
+    s
+}
+
+/// A closed, outward torus around the Y axis through `centre`: tube radius `minor` at distance
+/// `major` from the axis, `segments` around the axis and `sides` around the tube.
+pub fn torus(centre: Vec3, major: f32, minor: f32, segments: u32, sides: u32) -> TriangleSurface {
+    let (segments, sides) = (segments.max(3), sides.max(3));
+    let mut s = TriangleSurface::default();
+    for i in 0..segments {
+        let phi = std::f32::consts::TAU * i as f32 / segments as f32;
+        let radial = Vec3::new(phi.cos(), 0.0, -phi.sin());
+        for j in 0..sides {
+            let theta = std::f32::consts::TAU * j as f32 / sides as f32;
+            s.positions.push(
+                centre + radial * (major + minor * theta.cos()) + Vec3::Y * minor * theta.sin(),
+            );
+        }
+    }
+    let at = |i: u32, j: u32| (i % segments) * sides + j % sides;
+    for i in 0..segments {
+        for j in 0..sides {
+            let (a, b, c, d) = (at(i, j), at(i + 1, j), at(i + 1, j + 1), at(i, j + 1));
+            s.indices.extend_from_slice(&[a, b, c, a, c, d]);
+        }
+    }
+    s
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -185,6 +271,18 @@ mod tests {
                 a.dot(b.cross(c)) / 6.0
             })
             .sum()
+    }
+
+    #[test]
+    fn generated_shapes_enclose_their_volumes() {
+        let sphere = uv_sphere(Vec3::ONE, 2.0, 64, 32);
+        let exact = 4.0 / 3.0 * std::f64::consts::PI * 8.0;
+        let v = sphere.enclosed_volume();
+        assert!((v - exact).abs() < 0.01 * exact, "{v} vs {exact}");
+        let t = torus(Vec3::ZERO, 1.0, 0.25, 64, 32);
+        let exact = 2.0 * std::f64::consts::PI.powi(2) * 1.0 * 0.25 * 0.25;
+        let v = t.enclosed_volume();
+        assert!((v - exact).abs() < 0.01 * exact, "{v} vs {exact}");
     }
 
     #[test]

@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-use super::geometry::signed_volume;
+use super::geometry::{min_dihedral_deg, signed_volume};
 
 /// Compressed rows: row `i` is `items[offsets[i]..offsets[i + 1]]`.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -349,6 +349,15 @@ impl TetMesh {
             |(lo, hi), &p| (lo.min(p), hi.max(p)),
         )
     }
+
+    /// The smallest dihedral angle of any tet at rest, in degrees: the usual measure of tet
+    /// quality (a regular tet has 70.5, the grids' tets 45 and more; slivers approach 0).
+    pub fn min_dihedral_deg(&self) -> f32 {
+        self.tets
+            .iter()
+            .map(|tet| min_dihedral_deg(&tet.map(|i| self.positions[i as usize])))
+            .fold(180.0, f32::min)
+    }
 }
 
 #[cfg(test)]
@@ -424,6 +433,24 @@ mod tests {
         // Every error says what is wrong in words.
         let e = TetMesh::new(p, vec![[0, 1, 2, 7]]).unwrap_err();
         assert!(e.to_string().contains("vertex 7"));
+    }
+
+    #[test]
+    fn dihedral_angles_of_known_tets() {
+        let (p, t) = unit_tet();
+        // The corner tet: 90 degrees at the corner's three edges, acos(1/sqrt(3)) = 54.7 where
+        // the slanted face meets the others.
+        let m = TetMesh::new(p, t).unwrap();
+        let expected = (1.0f32 / 3.0f32.sqrt()).acos().to_degrees();
+        assert!((m.min_dihedral_deg() - expected).abs() < 1e-3);
+        let regular = vec![
+            Vec3::new(1.0, 1.0, 1.0),
+            Vec3::new(1.0, -1.0, -1.0),
+            Vec3::new(-1.0, 1.0, -1.0),
+            Vec3::new(-1.0, -1.0, 1.0),
+        ];
+        let m = TetMesh::new(regular, vec![[0, 1, 2, 3]]).unwrap();
+        assert!((m.min_dihedral_deg() - (1.0f32 / 3.0).acos().to_degrees()).abs() < 1e-3);
     }
 
     #[test]
