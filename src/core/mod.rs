@@ -8,9 +8,11 @@ pub mod geometry;
 pub mod grid;
 pub mod impulses;
 pub mod material;
+pub mod obj;
 pub mod roots;
 pub mod surface_mesh;
 pub mod tet_mesh;
+pub mod tetgen;
 pub mod tetrahedralize;
 pub mod winding;
 
@@ -20,8 +22,10 @@ pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::ImpulseOutcome;
 pub use material::{ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod};
+pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
 pub use tet_mesh::{TetMesh, TetMeshError};
+pub use tetgen::{TetGenError, TetGenFile, parse_tetgen, write_tetgen};
 pub use tetrahedralize::{
     Resolution, Tetrahedralization, TetrahedralizeError, face_components, tetrahedralize,
 };
