@@ -158,7 +158,8 @@ mod tests {
 
     #[test]
     fn bad_files_give_errors_with_their_line() {
-        let cases: [(&[u8], usize, fn(&ObjErrorKind) -> bool); 9] = [
+        type Check = fn(&ObjErrorKind) -> bool;
+        let cases: [(&[u8], usize, Check); 9] = [
             (b"", 0, |k| *k == ObjErrorKind::NoFaces),
             (b"v 0 0 0\nv 1 0 0\n", 0, |k| *k == ObjErrorKind::NoFaces),
             (b"v 0 0\n", 1, |k| matches!(k, ObjErrorKind::BadVertex(_))),
