@@ -230,6 +230,12 @@ pub enum SoftBodyErrorKind {
         /// Why it could not be used.
         reason: String,
     },
+    /// A soft body could not be built from an asset (feature `render`,
+    /// `SoftBodyFromAsset`); the entity gets no body.
+    Build {
+        /// Why.
+        reason: String,
+    },
     /// A render surface (feature `render`) could not be bound to the body; it is not deformed.
     Surface {
         /// The entity of the surface.
@@ -255,6 +261,11 @@ impl std::fmt::Display for SoftBodyError {
             SoftBodyErrorKind::BadScale { scale, reason } => write!(
                 f,
                 "soft body {}: cannot apply the scale {scale}: {reason}; the body keeps its size",
+                self.body
+            ),
+            SoftBodyErrorKind::Build { reason } => write!(
+                f,
+                "soft body {}: cannot be built from its asset: {reason}",
                 self.body
             ),
             SoftBodyErrorKind::Surface { surface, reason } => write!(

@@ -30,6 +30,8 @@ pub mod core;
 pub mod debug;
 #[cfg(feature = "egui")]
 pub mod inspector;
+#[cfg(feature = "render")]
+pub mod loading;
 pub mod plugin;
 pub mod scenes;
 #[cfg(feature = "render")]
@@ -38,6 +40,11 @@ pub mod surface;
 pub use components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
     SoftBodyGravity, SoftBodyStats, StaticCollider,
+};
+#[cfg(feature = "render")]
+pub use loading::{
+    SoftBodyAssetPlugin, SoftBodyAssetSet, SoftBodyFromAsset, SoftBodySource, TetGenLoader,
+    TetMeshAsset,
 };
 pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyTiming};
 #[cfg(feature = "render")]
@@ -50,6 +57,10 @@ pub mod prelude {
         SoftBodyGravity, SoftBodyStats, StaticCollider,
     };
     pub use crate::core::{ImpulseSettings, Plasticity, SoftBodyMaterial, TetMesh, VolumeMethod};
+    #[cfg(feature = "render")]
+    pub use crate::loading::{
+        SoftBodyAssetPlugin, SoftBodyFromAsset, SoftBodySource, TetMeshAsset,
+    };
     pub use crate::plugin::{SoftBodyPlugin, SoftBodySet};
     #[cfg(feature = "render")]
     pub use crate::surface::{SoftBodySurface, SoftBodySurfacePlugin};

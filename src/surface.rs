@@ -142,10 +142,13 @@ fn deform_surfaces(
             let Some(mesh) = meshes.get(&mesh3d.0) else {
                 continue;
             };
-            let Some(VertexAttributeValues::Float32x3(vertices)) =
-                mesh.attribute(Mesh::ATTRIBUTE_POSITION)
+            let Ok(VertexAttributeValues::Float32x3(vertices)) =
+                mesh.try_attribute(Mesh::ATTRIBUTE_POSITION)
             else {
-                fail(surface, "the mesh has no Float32x3 vertex positions".into());
+                fail(
+                    surface,
+                    "the mesh has no Float32x3 vertex positions in the main world".into(),
+                );
                 continue;
             };
             let scale = body.rest_scale();
@@ -165,7 +168,11 @@ fn deform_surfaces(
         let Some(mut mesh) = meshes.get_mut(&mesh3d.0) else {
             continue;
         };
-        if mesh.count_vertices() != surface.points.len() {
+        let vertex_count = match mesh.try_attribute(Mesh::ATTRIBUTE_POSITION) {
+            Ok(values) => values.len(),
+            Err(_) => 0,
+        };
+        if vertex_count != surface.points.len() {
             // The asset was replaced by one with another vertex count: bind again.
             surface.binding = None;
             continue;
@@ -189,8 +196,8 @@ fn deform_surfaces(
         // its world transform).
         let to_local = transform.compute_affine().inverse();
         let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        let Some(VertexAttributeValues::Float32x3(vertices)) =
-            mesh.attribute_mut(Mesh::ATTRIBUTE_POSITION)
+        let Ok(VertexAttributeValues::Float32x3(vertices)) =
+            mesh.try_attribute_mut(Mesh::ATTRIBUTE_POSITION)
         else {
             continue;
         };
@@ -200,7 +207,7 @@ fn deform_surfaces(
             hi = hi.max(local);
             *v = local.to_array();
         }
-        if mesh.indices().is_some() {
+        if mesh.try_indices().is_ok() {
             let _ = mesh.try_compute_smooth_normals();
         } else {
             let _ = mesh.try_compute_flat_normals();

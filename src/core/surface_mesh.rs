@@ -168,6 +168,13 @@ pub fn surface_nets(
 }
 
 impl TriangleSurface {
+    /// Adds `other`'s triangles (and vertices) to this surface, as a separate part.
+    pub fn append(&mut self, other: &TriangleSurface) {
+        let base = self.positions.len() as u32;
+        self.positions.extend_from_slice(&other.positions);
+        self.indices.extend(other.indices.iter().map(|i| i + base));
+    }
+
     /// Number of triangles.
     pub fn triangle_count(&self) -> usize {
         self.indices.len() / 3

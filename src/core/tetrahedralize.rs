@@ -611,9 +611,7 @@ mod tests {
     fn merged(parts: &[TriangleSurface]) -> TriangleSurface {
         let mut out = TriangleSurface::default();
         for p in parts {
-            let base = out.positions.len() as u32;
-            out.positions.extend_from_slice(&p.positions);
-            out.indices.extend(p.indices.iter().map(|i| i + base));
+            out.append(p);
         }
         out
     }
