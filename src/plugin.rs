@@ -170,7 +170,12 @@ fn prepare(
                         SoftBodyState::new(m.into(), *body.state.material())
                             .map_err(|e| e.to_string())
                     }) {
-                    Ok(state) => {
+                    Ok(mut state) => {
+                        // Velocities given before the spawn are kept (world frame, like the
+                        // simulation); only the rest shape changes.
+                        state
+                            .velocities_mut()
+                            .copy_from_slice(body.state.velocities());
                         body.state = state;
                         body.rest_scale = placement.scale;
                     }

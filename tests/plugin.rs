@@ -205,6 +205,26 @@ fn bad_input_gives_errors_not_panics() {
 }
 
 #[test]
+fn velocities_given_before_a_scaled_spawn_are_kept() {
+    let mut app = app(Vec3::ZERO);
+    let mut soft = SoftBody::new(cube(2), material(VolumeMethod::PAPER_IMPULSES)).unwrap();
+    for v in soft.state_mut().velocities_mut() {
+        *v = Vec3::new(1.0, 0.0, 0.0);
+    }
+    let body = app
+        .world_mut()
+        .spawn((soft, Transform::from_scale(Vec3::splat(3.0))))
+        .id();
+    for _ in 0..5 {
+        app.update();
+    }
+    let state = app.world().get::<SoftBody>(body).unwrap().state();
+    for v in state.velocities() {
+        assert!(v.distance(Vec3::X) < 1e-3, "{v}");
+    }
+}
+
+#[test]
 fn spawn_transform_places_rotates_and_scales_the_body() {
     let mut app = app(Vec3::ZERO);
     let mesh = cube(2);

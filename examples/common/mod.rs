@@ -95,7 +95,7 @@ pub struct OrbitCamera {
 }
 
 impl OrbitCamera {
-    fn transform(&self) -> Transform {
+    pub fn transform(&self) -> Transform {
         let rotation = Quat::from_euler(EulerRot::YXZ, self.yaw, -self.pitch, 0.0);
         let eye = self.focus + rotation * Vec3::new(0.0, 0.0, self.distance);
         let mut transform = Transform::from_translation(eye).looking_at(self.focus, Vec3::Y);
@@ -129,7 +129,11 @@ pub struct ExtraHelp(pub Vec<&'static str>);
 /// The app every example runs: window, plugins, camera, light, ground and controls. The example
 /// adds its own systems and calls `run`.
 pub fn example_app(title: &str, layout: Option<Layout>) -> App {
-    let options = ExampleOptions::from_args();
+    example_app_with(title, layout, ExampleOptions::from_args())
+}
+
+/// [`example_app`] with options the example parsed itself (it has options of its own).
+pub fn example_app_with(title: &str, layout: Option<Layout>, options: ExampleOptions) -> App {
     let mut app = App::new();
     app.add_plugins(DefaultPlugins.set(WindowPlugin {
         primary_window: Some(Window {

@@ -350,6 +350,46 @@ impl TetMesh {
         )
     }
 
+    /// The faces that belong to one tet only, oriented outwards, over the rest positions
+    /// (vertex indices are the mesh's): the surface to show for a mesh that has no finer one.
+    pub fn boundary_surface(&self) -> super::surface_mesh::TriangleSurface {
+        let face_of = |tet: &[u32; 4], k: usize| {
+            let face = [tet[(k + 1) % 4], tet[(k + 2) % 4], tet[(k + 3) % 4]];
+            let mut key = face;
+            key.sort_unstable();
+            (face, key)
+        };
+        let mut count: std::collections::HashMap<[u32; 3], u32> =
+            std::collections::HashMap::with_capacity(self.tets.len() * 2);
+        for tet in &self.tets {
+            for k in 0..4 {
+                *count.entry(face_of(tet, k).1).or_insert(0) += 1;
+            }
+        }
+        let mut surface = super::surface_mesh::TriangleSurface {
+            positions: self.positions.clone(),
+            indices: Vec::new(),
+        };
+        for tet in &self.tets {
+            for k in 0..4 {
+                let (face, key) = face_of(tet, k);
+                if count[&key] != 1 {
+                    continue;
+                }
+                let [a, b, c] = face.map(|v| self.positions[v as usize]);
+                let away = (a + b + c) / 3.0 - self.positions[tet[k] as usize];
+                if (b - a).cross(c - a).dot(away) >= 0.0 {
+                    surface.indices.extend_from_slice(&face);
+                } else {
+                    surface
+                        .indices
+                        .extend_from_slice(&[face[0], face[2], face[1]]);
+                }
+            }
+        }
+        surface
+    }
+
     /// The smallest dihedral angle of any tet at rest, in degrees: the usual measure of tet
     /// quality (a regular tet has 70.5, the grids' tets 45 and more; slivers approach 0).
     pub fn min_dihedral_deg(&self) -> f32 {
@@ -433,6 +473,20 @@ mod tests {
         // Every error says what is wrong in words.
         let e = TetMesh::new(p, vec![[0, 1, 2, 7]]).unwrap_err();
         assert!(e.to_string().contains("vertex 7"));
+    }
+
+    #[test]
+    fn boundary_surface_of_a_grid_is_its_box() {
+        let m = crate::core::grid::box_grid(
+            glam::UVec3::new(3, 2, 4),
+            Vec3::splat(0.5),
+            Vec3::new(1.0, 2.0, 3.0),
+        )
+        .unwrap();
+        let s = m.boundary_surface();
+        // Two triangles per cell face on the box's surface, enclosing the box outwards.
+        assert_eq!(s.triangle_count(), 2 * 2 * (3 * 2 + 2 * 4 + 3 * 4));
+        assert!((s.enclosed_volume() - 1.5 * 1.0 * 2.0).abs() < 1e-4);
     }
 
     #[test]
