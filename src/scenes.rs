@@ -18,7 +18,10 @@ use glam::UVec3;
 use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, StaticCollider,
 };
-use crate::core::{Plasticity, SoftBodyMaterial, TetMesh, VolumeMethod, box_grid, sdf_grid};
+use crate::core::{
+    Plasticity, Resolution, SoftBodyMaterial, TetMesh, TriangleSurface, VolumeMethod, box_grid,
+    parse_obj, tetrahedralize,
+};
 use crate::plugin::{SoftBodyPlugin, SoftBodySet};
 
 /// One of the paper's scenes.
@@ -235,27 +238,26 @@ impl PaperScene {
             PaperScene::SoftCube => {
                 box_grid(UVec3::splat(12), Vec3::splat(SOFT_CUBE_CELL), Vec3::ZERO)
             }
-            PaperScene::Creature => creature_tet_mesh(),
+            PaperScene::Creature => {
+                // Tetrahedralized once per process (a tenth of a second), then shared.
+                static CREATURE: std::sync::OnceLock<Arc<TetMesh>> = std::sync::OnceLock::new();
+                return CREATURE
+                    .get_or_init(|| {
+                        Arc::new(creature_tet_mesh().expect("the shipped creature tetrahedralizes"))
+                    })
+                    .clone();
+            }
             PaperScene::Plastic => box_grid(UVec3::new(12, 5, 12), Vec3::splat(CELL), Vec3::ZERO),
         };
         Arc::new(mesh.expect("the built-in scene meshes are valid"))
     }
 
     /// The detailed surface drawn for the scene's body, in the tet mesh's frame: a box
-    /// subdivided four times finer than its cells, or the creature's signed distance function
-    /// sampled three times finer than its tet grid.
-    pub fn render_surface(self) -> crate::core::TriangleSurface {
+    /// subdivided four times finer than its cells, or the creature's shipped surface
+    /// ([`creature_surface`]).
+    pub fn render_surface(self) -> TriangleSurface {
         match self {
-            PaperScene::Creature => {
-                let (lo, hi) = creature_bounds();
-                let margin = Vec3::splat(CREATURE_CELL);
-                crate::core::surface_nets(
-                    creature_sdf,
-                    lo - margin,
-                    hi + margin,
-                    CREATURE_CELL / 3.0,
-                )
-            }
+            PaperScene::Creature => creature_surface().clone(),
             _ => {
                 let (lo, hi) = self.tet_mesh().bounds();
                 let cell = if self == PaperScene::SoftCube {
@@ -493,15 +495,29 @@ pub fn creature_bounds() -> (Vec3, Vec3) {
     (Vec3::new(-1.3, -0.02, -1.3), Vec3::new(1.3, 2.95, 1.0))
 }
 
-/// The creature's tet mesh: the cells of a 5-tets-per-cell grid inside [`creature_sdf`], with
-/// the cell size chosen for about 6500 tets (the paper's armadillo has 6510).
-pub fn creature_tet_mesh() -> Result<TetMesh, crate::core::GridError> {
-    let (lo, hi) = creature_bounds();
-    sdf_grid(creature_sdf, lo, hi, CREATURE_CELL)
+/// The creature's detailed surface (24 872 triangles), shipped in `assets/creature.obj` and
+/// built into the crate. `examples/creature_asset.rs` writes it from [`creature_sdf`].
+pub fn creature_surface() -> &'static TriangleSurface {
+    static SURFACE: std::sync::OnceLock<TriangleSurface> = std::sync::OnceLock::new();
+    SURFACE.get_or_init(|| {
+        parse_obj(include_bytes!("../assets/creature.obj"))
+            .expect("the shipped creature surface is valid OBJ (tested)")
+    })
 }
 
-/// Cell size of the creature's tet grid, chosen for about 6500 tets.
-pub const CREATURE_CELL: f32 = 0.1144;
+/// Tets of the creature scene: about the 6510 of the paper's armadillo.
+pub const CREATURE_TETS: u32 = 6500;
+
+/// The creature's tet mesh: [`creature_surface`] tetrahedralized to about [`CREATURE_TETS`].
+pub fn creature_tet_mesh() -> Result<TetMesh, crate::core::TetrahedralizeError> {
+    let surface = creature_surface();
+    tetrahedralize(
+        &surface.positions,
+        &surface.indices,
+        Resolution::TargetTets(CREATURE_TETS),
+    )
+    .map(|t| t.mesh)
+}
 
 /// A headless app (`MinimalPlugins`, time advancing exactly one 10 ms step per update) with the
 /// plugin, the scene drivers and `scene` spawned with `method`. Returns the app and the body.

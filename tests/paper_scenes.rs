@@ -196,3 +196,25 @@ fn plastic_block_keeps_volume_and_its_dent() {
         "no permanent deformation: height {height} of {rest_height}"
     );
 }
+
+#[test]
+fn the_shipped_creature_is_closed_and_becomes_about_6500_tets() {
+    use bevy_soft_body::scenes::{CREATURE_TETS, creature_surface};
+    let surface = creature_surface();
+    // Closed: every edge is shared by exactly two triangles, running it in opposite directions.
+    let mut edges = std::collections::HashMap::new();
+    for t in surface.indices.chunks_exact(3) {
+        for k in 0..3 {
+            *edges.entry((t[k], t[(k + 1) % 3])).or_insert(0) += 1;
+        }
+    }
+    for (&(a, b), &n) in &edges {
+        assert_eq!(n, 1, "edge {a}-{b} used {n} times in one direction");
+        assert_eq!(edges.get(&(b, a)), Some(&1), "edge {a}-{b} has no twin");
+    }
+    let tets = PaperScene::Creature.tet_mesh();
+    let ratio = tets.tet_count() as f64 / CREATURE_TETS as f64;
+    assert!((ratio - 1.0).abs() < 0.05, "{} tets", tets.tet_count());
+    let volume = tets.total_rest_volume() / surface.enclosed_volume();
+    assert!((volume - 1.0).abs() < 0.03, "volume ratio {volume}");
+}
