@@ -43,8 +43,8 @@ pub use components::{
 };
 #[cfg(feature = "render")]
 pub use loading::{
-    SoftBodyAssetPlugin, SoftBodyAssetSet, SoftBodyFromAsset, SoftBodySource, TetGenLoader,
-    TetMeshAsset,
+    ObjMeshLoader, SoftBodyAssetPlugin, SoftBodyAssetSet, SoftBodyFromAsset, SoftBodySource,
+    TetGenLoader, TetMeshAsset,
 };
 pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyTiming};
 #[cfg(feature = "render")]

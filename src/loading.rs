@@ -1,6 +1,6 @@
-//! Soft bodies from assets (feature `render`): from any render [`Mesh`] (a glTF primitive, a
-//! mesh built in code), tetrahedralized off the main thread, or from a TetGen `.node`/`.ele`
-//! pair loaded as a [`TetMeshAsset`].
+//! Soft bodies from assets (feature `render`): from any render [`Mesh`] (a glTF primitive, an
+//! OBJ file through [`ObjMeshLoader`], a mesh built in code), tetrahedralized off the main
+//! thread, or from a TetGen `.node`/`.ele` pair loaded as a [`TetMeshAsset`].
 //!
 //! Spawn [`SoftBodyFromAsset`] with a [`Transform`] (and, to see the model deform, the same
 //! mesh as [`Mesh3d`] with a material). When the asset has loaded, [`SoftBodyAssetPlugin`]
@@ -96,6 +96,46 @@ impl AssetLoader for TetGenLoader {
     }
 }
 
+/// Loads Wavefront `.obj` files as [`Mesh`]es (positions, triangles and smooth normals; kept
+/// in the main world so that a [`SoftBodySurface`] can deform them), so that an OBJ model can be
+/// both drawn and made a soft body. Registered by [`SoftBodyAssetPlugin`] unless
+/// `obj_loader` is off (for games that load OBJ files with another plugin).
+#[derive(Default, TypePath)]
+pub struct ObjMeshLoader;
+
+/// Why an OBJ asset could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum ObjLoadError {
+    /// The file could not be read.
+    #[error("cannot read the OBJ file: {0}")]
+    Read(#[from] std::io::Error),
+    /// The file is not a usable OBJ mesh.
+    #[error(transparent)]
+    Obj(#[from] crate::core::ObjError),
+}
+
+impl AssetLoader for ObjMeshLoader {
+    type Asset = Mesh;
+    type Settings = ();
+    type Error = ObjLoadError;
+
+    async fn load(
+        &self,
+        reader: &mut dyn Reader,
+        _settings: &(),
+        _load_context: &mut LoadContext<'_>,
+    ) -> Result<Mesh, ObjLoadError> {
+        let mut bytes = Vec::new();
+        reader.read_to_end(&mut bytes).await?;
+        let surface = crate::core::parse_obj(&bytes)?;
+        Ok(crate::surface::surface_mesh(&surface))
+    }
+
+    fn extensions(&self) -> &[&str] {
+        &["obj"]
+    }
+}
+
 /// Where a [`SoftBodyFromAsset`] gets its tet mesh.
 #[derive(Clone, Debug)]
 pub enum SoftBodySource {
@@ -142,15 +182,28 @@ impl SoftBodyFromAsset {
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SoftBodyAssetSet;
 
-/// Registers [`TetMeshAsset`] with its loader and builds [`SoftBodyFromAsset`]s. Needs the
-/// asset and mesh plugins (part of `DefaultPlugins`) and [`crate::SoftBodyPlugin`].
-pub struct SoftBodyAssetPlugin;
+/// Registers [`TetMeshAsset`] with its loader (and, by default, [`ObjMeshLoader`]) and builds
+/// [`SoftBodyFromAsset`]s. Needs the asset and mesh plugins (part of `DefaultPlugins`) and
+/// [`crate::SoftBodyPlugin`].
+pub struct SoftBodyAssetPlugin {
+    /// Register [`ObjMeshLoader`] for `.obj` files.
+    pub obj_loader: bool,
+}
+
+impl Default for SoftBodyAssetPlugin {
+    fn default() -> Self {
+        SoftBodyAssetPlugin { obj_loader: true }
+    }
+}
 
 impl Plugin for SoftBodyAssetPlugin {
     fn build(&self, app: &mut App) {
         app.init_asset::<TetMeshAsset>()
             .init_asset_loader::<TetGenLoader>()
             .add_systems(Update, build_bodies.in_set(SoftBodyAssetSet));
+        if self.obj_loader {
+            app.init_asset_loader::<ObjMeshLoader>();
+        }
     }
 }
 

@@ -27,10 +27,21 @@ fn loading_app(asset_dir: Option<&PathBuf>) -> App {
         MeshPlugin,
         SoftBodyPlugin::default(),
         SoftBodySurfacePlugin,
-        SoftBodyAssetPlugin,
-    ));
+        SoftBodyAssetPlugin::default(),
+    ))
+    .init_resource::<Seen>()
+    .add_systems(
+        PostUpdate,
+        |mut reader: MessageReader<SoftBodyError>, mut seen: ResMut<Seen>| {
+            seen.0.extend(reader.read().cloned());
+        },
+    );
     app
 }
+
+/// Every [`SoftBodyError`] written so far.
+#[derive(Resource, Default)]
+struct Seen(Vec<SoftBodyError>);
 
 /// Updates until `done` holds, for at most 20 s of wall time (the build runs on other threads).
 fn update_until(app: &mut App, done: impl Fn(&World) -> bool) {
@@ -45,8 +56,7 @@ fn update_until(app: &mut App, done: impl Fn(&World) -> bool) {
 }
 
 fn build_errors(app: &App) -> Vec<SoftBodyError> {
-    let messages = app.world().resource::<Messages<SoftBodyError>>();
-    messages.get_cursor().read(messages).cloned().collect()
+    app.world().resource::<Seen>().0.clone()
 }
 
 #[test]
@@ -121,7 +131,7 @@ fn a_mesh_that_cannot_be_a_body_is_reported() {
 }
 
 #[test]
-fn tetgen_files_load_as_assets() {
+fn tetgen_and_obj_files_load_as_assets() {
     let dir = std::env::temp_dir().join(format!("bevy_soft_body_loading_{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let cube = box_grid(UVec3::new(3, 2, 2), Vec3::splat(0.1), Vec3::ZERO).unwrap();
@@ -130,6 +140,12 @@ fn tetgen_files_load_as_assets() {
     std::fs::write(dir.join("cube.ele"), &ele).unwrap();
     std::fs::write(dir.join("broken.node"), &node).unwrap();
     std::fs::write(dir.join("broken.ele"), "1 4 0\n1 1 2 3\n").unwrap();
+    let sphere = uv_sphere(Vec3::ZERO, 0.5, 24, 12);
+    std::fs::write(
+        dir.join("sphere.obj"),
+        bevy_soft_body::core::write_obj(&sphere),
+    )
+    .unwrap();
 
     let mut app = loading_app(Some(&dir));
     let server = app.world().resource::<AssetServer>().clone();
@@ -147,9 +163,29 @@ fn tetgen_files_load_as_assets() {
             SoftBodyMaterial::default(),
         ))
         .id();
+    // An OBJ file loads as a render mesh, drawn and made a body.
+    let obj: Handle<Mesh> = server.load("sphere.obj");
+    let from_obj = app
+        .world_mut()
+        .spawn((
+            SoftBodyFromAsset::new(
+                SoftBodySource::Mesh {
+                    mesh: obj.clone(),
+                    resolution: Resolution::TargetTets(1000),
+                },
+                SoftBodyMaterial::default(),
+            ),
+            Mesh3d(obj),
+        ))
+        .id();
     update_until(&mut app, |w| {
-        w.get::<SoftBodyFromAsset>(good).is_none() && w.get::<SoftBodyFromAsset>(bad).is_none()
+        [good, bad, from_obj]
+            .iter()
+            .all(|&e| w.get::<SoftBodyFromAsset>(e).is_none())
     });
+    let obj_body = app.world().get::<SoftBody>(from_obj).unwrap();
+    assert!(obj_body.state().mesh().tet_count() > 800);
+    assert!(app.world().get::<SoftBodySurface>(from_obj).is_some());
     let body = app.world().get::<SoftBody>(good).unwrap();
     assert_eq!(body.state().mesh().tets(), cube.tets());
     assert!(app.world().get::<SoftBody>(bad).is_none());

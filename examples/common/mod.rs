@@ -147,6 +147,7 @@ pub fn example_app_with(title: &str, layout: Option<Layout>, options: ExampleOpt
         SoftBodyPlugin::default(),
         PaperScenesPlugin,
         SoftBodySurfacePlugin,
+        SoftBodyAssetPlugin::default(),
         SoftBodyDebugPlugin,
         SoftBodyInspectorPlugin,
     ))
