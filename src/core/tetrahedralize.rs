@@ -41,8 +41,12 @@ impl Default for Resolution {
     }
 }
 
-/// The most tets [`Resolution::TargetTets`] may ask for (the grid's own cell limit is higher).
+/// The most tets a tetrahedralization may make, whichever way the resolution is given.
 pub const MAX_TARGET_TETS: u32 = 5_000_000;
+
+/// The most grid cells the inside test may visit (the box around the input, at the cell size):
+/// 4 M winding-number queries take a few seconds.
+pub const MAX_TETRAHEDRALIZE_CELLS: u64 = 1 << 22;
 
 /// What is wrong with a tetrahedralization request.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -86,6 +90,14 @@ pub enum TetrahedralizeError {
     )]
     NothingInside {
         /// The cell size used.
+        cell_size: f32,
+    },
+    /// The cell size would make more than [`MAX_TARGET_TETS`] tets.
+    #[error("{tets} tets at cell size {cell_size} is more than the limit of {MAX_TARGET_TETS}")]
+    TooManyTets {
+        /// Tets the cell size would make.
+        tets: u64,
+        /// The cell size.
         cell_size: f32,
     },
     /// The grid could not be built (too many cells for the chosen cell size, most often).
@@ -170,10 +182,25 @@ pub fn tetrahedralize(
         cell = size.max_element().max(f32::MIN_POSITIVE);
     }
 
+    // Far too many tets by the enclosed volume: say so before millions of inside queries.
+    let estimate = 5.0 * surface_volume / (cell as f64).powi(3);
+    if estimate > 1.5 * MAX_TARGET_TETS as f64 {
+        return Err(TetrahedralizeError::TooManyTets {
+            tets: estimate as u64,
+            cell_size: cell,
+        });
+    }
     let (min, cells) = grid_frame(bounds_lo, bounds_hi, cell)?;
     let inside = inside_cells(&winding, min, cells, cell);
-    if !inside.iter().any(|&b| b) {
+    let kept = inside.iter().filter(|&&b| b).count() as u64;
+    if kept == 0 {
         return Err(TetrahedralizeError::NothingInside { cell_size: cell });
+    }
+    if 5 * kept > MAX_TARGET_TETS as u64 {
+        return Err(TetrahedralizeError::TooManyTets {
+            tets: 5 * kept,
+            cell_size: cell,
+        });
     }
     let index = |c: UVec3| ((c.z * cells.y + c.y) * cells.x + c.x) as usize;
     let grid = grid_cells(cells, Vec3::splat(cell), min, |c| inside[index(c)])?;
@@ -321,14 +348,15 @@ fn fit_boundary(
 fn grid_frame(lo: Vec3, hi: Vec3, cell: f32) -> Result<(Vec3, UVec3), TetrahedralizeError> {
     let counts = ((hi - lo) / cell + 1.0).ceil();
     let total = counts.x as f64 * counts.y as f64 * counts.z as f64;
-    if !(total.is_finite() && total <= MAX_GRID_CELLS as f64) {
+    let limit = MAX_TETRAHEDRALIZE_CELLS.min(MAX_GRID_CELLS);
+    if !(total.is_finite() && total <= limit as f64) {
         return Err(GridError::TooManyCells {
             cells: if total.is_finite() {
                 total as u64
             } else {
                 u64::MAX
             },
-            limit: MAX_GRID_CELLS,
+            limit,
         }
         .into());
     }
@@ -779,6 +807,11 @@ mod tests {
         assert!(matches!(
             tetrahedralize(&s.positions, &s.indices, Resolution::CellSize(1e-5)),
             Err(E::Grid(GridError::TooManyCells { .. }))
+        ));
+        // A cell size whose box fits the query limit but whose inside would be too many tets.
+        assert!(matches!(
+            tetrahedralize(&s.positions, &s.indices, Resolution::CellSize(0.0128)),
+            Err(E::TooManyTets { .. })
         ));
         // A single flat square encloses nothing.
         let quad = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 0.0, 1.0), Vec3::Z];
