@@ -804,14 +804,17 @@ mod tests {
                 Err(E::BadResolution(_))
             ));
         }
+        for cell in [1e-5, 0.0128] {
+            assert!(matches!(
+                tetrahedralize(&s.positions, &s.indices, Resolution::CellSize(cell)),
+                Err(E::TooManyTets { .. })
+            ));
+        }
+        // A surface enclosing nothing gives no estimate; its box is too big to query.
+        let quad = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 0.0, 1.0), Vec3::Z];
         assert!(matches!(
-            tetrahedralize(&s.positions, &s.indices, Resolution::CellSize(1e-5)),
+            tetrahedralize(&quad, &[0, 1, 2, 0, 2, 3], Resolution::CellSize(1e-5)),
             Err(E::Grid(GridError::TooManyCells { .. }))
-        ));
-        // A cell size whose box fits the query limit but whose inside would be too many tets.
-        assert!(matches!(
-            tetrahedralize(&s.positions, &s.indices, Resolution::CellSize(0.0128)),
-            Err(E::TooManyTets { .. })
         ));
         // A single flat square encloses nothing.
         let quad = [Vec3::ZERO, Vec3::X, Vec3::new(1.0, 0.0, 1.0), Vec3::Z];
