@@ -749,6 +749,27 @@ mod tests {
     }
 
     #[test]
+    fn boxes_meeting_at_a_non_manifold_edge() {
+        // Two cubes sharing one edge (welded): four triangles meet on it, so orientation cannot
+        // be carried across it; each cube is oriented on its own.
+        let a = subdivided_box(Vec3::ZERO, Vec3::ONE, 0.25);
+        // b meets a only along the edge x = 1, y = 1 (z from 0 to 1).
+        let b = subdivided_box(Vec3::new(1.0, 1.0, 0.0), Vec3::new(2.0, 2.0, 1.0), 0.25);
+        let mut inside_out = b.clone();
+        for t in inside_out.indices.chunks_exact_mut(3) {
+            t.swap(1, 2);
+        }
+        let t = run(&merged(&[a, inside_out]));
+        assert_eq!(t.input_parts, 1, "welded along the shared edge");
+        // b's triangles were turned back outwards.
+        assert_eq!(t.flipped_triangles, b.triangle_count());
+        let ratio = t.mesh.total_rest_volume() / 2.0;
+        assert!((ratio - 1.0).abs() < 0.03, "volume ratio {ratio}");
+        assert!(t.mesh.rest_volumes().iter().all(|&v| v > 0.0));
+        assert!(t.mesh.min_dihedral_deg() >= FIT_MIN_DIHEDRAL_DEG - 1e-3);
+    }
+
+    #[test]
     fn cell_size_resolution() {
         let s = uv_sphere(Vec3::ZERO, 1.0, 48, 24);
         let t = tetrahedralize(&s.positions, &s.indices, Resolution::CellSize(0.2)).unwrap();
