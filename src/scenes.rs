@@ -27,7 +27,8 @@ use crate::plugin::{SoftBodyPlugin, SoftBodySet};
 /// One of the paper's scenes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Reflect)]
 pub enum PaperScene {
-    /// A 4320-tet bar, one end held, the other turned once about the bar's axis, then released.
+    /// A 4320-tet bar, one end held, the other turned one and a half times about the bar's axis,
+    /// then released.
     BarTwist,
     /// A rigid sphere dropped onto the same bar, held at both ends.
     SphereOnBar,

@@ -1,0 +1,171 @@
+//! Step times of every scene and method, headless through the plugin:
+//!
+//! cargo run --release --all-features --example bench -- [--threads N] [--only NAME]
+//!
+//! prints one line per run, `scene=NAME method=NAME threads=N tets=N mean_step_ms=X`: the five
+//! paper scenes with both methods over their whole duration, boxes of 1 000 to 200 000 tets
+//! settling on the ground, and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is
+//! the solver time per 10 ms step summed over the scene's bodies (`SoftBodyStats`), so Bevy's
+//! own overhead is not in it. `--threads N` sizes Bevy's task pools; `--only NAME` runs the
+//! scenes whose name contains NAME. Timings are for comparing runs on one machine; the criterion
+//! benches (`cargo bench`) time single steps with statistics.
+
+use std::time::Duration;
+
+use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
+use bevy::prelude::*;
+use bevy_soft_body::core::{VolumeMethod, box_grid};
+use bevy_soft_body::prelude::*;
+use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
+
+struct Args {
+    threads: usize,
+    only: Option<String>,
+}
+
+fn parse_args() -> Result<Args, String> {
+    let mut args = std::env::args().skip(1);
+    let mut parsed = Args {
+        threads: 1,
+        only: None,
+    };
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--threads" => {
+                let n = args.next().ok_or("--threads needs a number")?;
+                parsed.threads = n
+                    .parse()
+                    .ok()
+                    .filter(|&n| n >= 1)
+                    .ok_or(format!("--threads: `{n}` is not a thread count"))?;
+            }
+            "--only" => parsed.only = Some(args.next().ok_or("--only needs a name")?),
+            "--bench" => {} // passed by `cargo bench`-style runners; nothing to do
+            "-h" | "--help" => return Err("usage: bench [--threads N] [--only NAME]".into()),
+            other => return Err(format!("unknown argument `{other}` (try --help)")),
+        }
+    }
+    Ok(parsed)
+}
+
+/// A headless app with `threads` threads in Bevy's task pools, stepping 10 ms per update.
+fn app(threads: usize) -> App {
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins.set(TaskPoolPlugin {
+            task_pool_options: TaskPoolOptions::with_num_threads(threads),
+        }),
+        SoftBodyPlugin::default(),
+        PaperScenesPlugin,
+    ))
+    .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+        Duration::from_millis(10),
+    ));
+    app
+}
+
+/// Runs `steps` steps of `app` and returns the tets and the summed mean solver time per step of
+/// its bodies.
+fn run(app: &mut App, steps: u32) -> (usize, f64) {
+    // The first update only starts the clock.
+    app.update();
+    for _ in 0..steps {
+        app.update();
+    }
+    let world = app.world_mut();
+    let mut bodies = world.query::<(&SoftBody, &SoftBodyStats)>();
+    bodies
+        .iter(world)
+        .fold((0, 0.0), |(tets, ms), (body, stats)| {
+            (
+                tets + body.state().mesh().tet_count(),
+                ms + stats.mean_step_ms(),
+            )
+        })
+}
+
+fn report(scene: &str, method: &str, threads: usize, tets: usize, ms: f64) {
+    println!("scene={scene} method={method} threads={threads} tets={tets} mean_step_ms={ms:.3}");
+}
+
+fn main() {
+    let args = match parse_args() {
+        Ok(a) => a,
+        Err(e) => {
+            eprintln!("{e}");
+            std::process::exit(2);
+        }
+    };
+    let wanted = |name: &str| args.only.as_deref().is_none_or(|o| name.contains(o));
+    let methods = [VolumeMethod::PAPER_BASELINE, VolumeMethod::PAPER_IMPULSES];
+
+    for scene in PaperScene::ALL {
+        if !wanted(scene.name()) {
+            continue;
+        }
+        for method in methods {
+            let mut app = app(args.threads);
+            {
+                let world = app.world_mut();
+                let mut commands = world.commands();
+                scene.spawn(&mut commands, method, Vec3::ZERO);
+                world.flush();
+            }
+            let steps = (scene.duration_secs() * 100.0).round() as u32;
+            let (tets, ms) = run(&mut app, steps);
+            report(scene.name(), method.name(), args.threads, tets, ms);
+        }
+    }
+
+    // Boxes from 1 000 to 200 000 tets settling on the ground under the creature scene's
+    // material and gravity, 100 steps each: the cost per tet as a body grows.
+    let boxes = [
+        ("box_1k", UVec3::splat(6)),
+        ("box_9k", UVec3::splat(12)),
+        ("box_29k", UVec3::splat(18)),
+        ("box_69k", UVec3::splat(24)),
+        ("box_200k", UVec3::new(40, 25, 40)),
+    ];
+    for (name, cells) in boxes {
+        if !wanted(name) {
+            continue;
+        }
+        for method in methods {
+            let mut app = app(args.threads);
+            let mesh = box_grid(cells, Vec3::splat(0.1), Vec3::ZERO).expect("a valid grid");
+            let material = PaperScene::Creature.material(method);
+            let world = app.world_mut();
+            world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
+            world.spawn((
+                SoftBody::new(mesh.into(), material).expect("a valid material"),
+                Transform::from_xyz(0.0, 0.05, 0.0),
+            ));
+            world.spawn((StaticCollider::ground(0.8), Transform::default()));
+            let (tets, ms) = run(&mut app, 100);
+            report(name, method.name(), args.threads, tets, ms);
+        }
+    }
+
+    // Many bodies: 16 cubes of 6^3 cells side by side (bodies do not collide with each other).
+    if wanted("bodies_16") {
+        for method in methods {
+            let mut app = app(args.threads);
+            let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(6), Vec3::splat(0.1), Vec3::ZERO)
+                .expect("a valid grid")
+                .into();
+            let material = PaperScene::Creature.material(method);
+            let world = app.world_mut();
+            world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
+            for k in 0..16 {
+                let (i, j) = (k % 4, k / 4);
+                world.spawn((
+                    SoftBody::new(mesh.clone(), material).expect("a valid material"),
+                    Transform::from_xyz(i as f32 * 0.75, 0.2 + 0.05 * k as f32, j as f32 * 0.75),
+                ));
+            }
+            world.spawn((StaticCollider::ground(0.8), Transform::default()));
+            let (tets, ms) = run(&mut app, 300);
+            report("bodies_16", method.name(), args.threads, tets, ms);
+        }
+    }
+}
