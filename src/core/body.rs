@@ -553,6 +553,41 @@ impl SoftBodyState {
         self.apply_plasticity(h);
         self.integrate_positions(h);
     }
+
+    /// Runs a whole step of this body among `spheres` and `colliders`, in the order the plugin
+    /// runs its stages (for one body): forces (the spheres' too), a contact pass, the volume
+    /// passes, plasticity, a last contact pass, then positions (the spheres' too). For using the
+    /// core without Bevy, and for benchmarks of exactly what the plugin does per body.
+    pub fn step_with_contacts(
+        &mut self,
+        h: f32,
+        gravity: Vec3,
+        spheres: &mut [RigidSphereState],
+        colliders: &[super::contacts::ColliderInstance],
+    ) {
+        // Spheres against the colliders, then the particles against both (the ground last).
+        let contact_pass = |body: &mut Self, spheres: &mut [RigidSphereState]| {
+            for sphere in spheres.iter_mut() {
+                sphere.resolve_static_contacts(h, colliders);
+            }
+            body.resolve_sphere_contacts(h, spheres);
+            body.resolve_static_contacts(h, colliders);
+        };
+        self.begin_step();
+        self.apply_forces(h, gravity);
+        for sphere in spheres.iter_mut() {
+            sphere.apply_forces(h, gravity);
+        }
+        contact_pass(self, spheres);
+        self.one_ring_pass(h, spheres);
+        self.per_tet_pass(h, spheres);
+        self.apply_plasticity(h);
+        contact_pass(self, spheres);
+        self.integrate_positions(h);
+        for sphere in spheres.iter_mut() {
+            sphere.integrate_position(h);
+        }
+    }
 }
 
 #[cfg(test)]
