@@ -142,7 +142,8 @@ impl SoftBodyState {
             velocities: vec![Vec3::ZERO; n],
             masses: vec![0.0; n],
             inv_masses: vec![0.0; n],
-            kinematic: Vec::new(),
+            // Room for every particle up front, so that no later step allocates (tests/no_alloc.rs).
+            kinematic: Vec::with_capacity(n),
             spring_rest: spring_rest0.clone(),
             plastic_strain: vec![0.0; spring_rest0.len()],
             spring_rest0,
@@ -153,7 +154,7 @@ impl SoftBodyState {
             clamp_bounds: Default::default(),
             contact_kept: vec![0.0; n],
             contact_sphere: vec![u32::MAX; n],
-            touching: Vec::new(),
+            touching: Vec::with_capacity(n),
             ring_tets: vec![
                 RingTet::default();
                 (0..n).map(|v| mesh.one_ring(v).len()).max().unwrap_or(0)

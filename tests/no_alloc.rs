@@ -1,0 +1,91 @@
+//! A step allocates nothing once the first step has sized its buffers: the core's promise
+//! ("no allocation in the step"), checked with a counting global allocator.
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
+use bevy_soft_body::core::{
+    ColliderInstance, RigidSphereState, SoftBodyMaterial, SoftBodyState, VolumeMethod, box_grid,
+};
+use glam::{UVec3, Vec3};
+use parry3d::math::Pose;
+use parry3d::shape::SharedShape;
+
+struct Counting;
+
+static COUNTING: AtomicBool = AtomicBool::new(false);
+static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        if COUNTING.load(Ordering::Relaxed) {
+            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
+        }
+        // SAFETY: forwarded unchanged to the system allocator.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn steps_allocate_nothing_after_the_first() {
+    for method in [VolumeMethod::PAPER_BASELINE, VolumeMethod::PAPER_IMPULSES] {
+        let mesh = box_grid(UVec3::new(6, 4, 5), Vec3::splat(0.1), Vec3::ZERO).unwrap();
+        let material = SoftBodyMaterial {
+            method,
+            plasticity: Some(bevy_soft_body::core::Plasticity {
+                yield_strain: 0.01,
+                creep: 4.0,
+                max_strain: 0.5,
+            }),
+            ..Default::default()
+        };
+        let mut body = SoftBodyState::new(mesh.into(), material).unwrap();
+        // Squeezed and falling on the ground with a sphere landing on it: every pass has work.
+        for (p, v) in body.positions().to_vec().iter().zip(body.velocities_mut()) {
+            *v = Vec3::new(if p.x < 0.3 { 1.0 } else { -1.0 }, -1.0, 0.0);
+        }
+        let mut spheres = vec![RigidSphereState {
+            position: Vec3::new(0.3, 0.55, 0.25),
+            velocity: Vec3::new(0.0, -1.0, 0.0),
+            radius: 0.2,
+            inv_mass: 1.0 / 20.0,
+            friction: 0.5,
+        }];
+        let colliders = vec![ColliderInstance::new(
+            SharedShape::halfspace(Vec3::Y),
+            Pose::from_parts(Vec3::new(0.0, -0.05, 0.0), glam::Quat::IDENTITY),
+            0.8,
+        )];
+        body.step_with_contacts(0.01, Vec3::new(0.0, -9.81, 0.0), &mut spheres, &colliders);
+        ALLOCATIONS.store(0, Ordering::Relaxed);
+        COUNTING.store(true, Ordering::Relaxed);
+        for _ in 0..50 {
+            body.step_with_contacts(0.01, Vec3::new(0.0, -9.81, 0.0), &mut spheres, &colliders);
+        }
+        COUNTING.store(false, Ordering::Relaxed);
+        let contacts = body.contacts().count();
+        let allocations = ALLOCATIONS.load(Ordering::Relaxed);
+        assert_eq!(
+            allocations,
+            0,
+            "{} allocated {allocations} times",
+            method.name()
+        );
+        // The steps did meet the ground and the sphere.
+        assert!(contacts > 0);
+    }
+}
