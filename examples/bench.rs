@@ -3,7 +3,8 @@
 //! cargo run --release --all-features --example bench -- [--threads N] [--only NAME]
 //!
 //! prints one line per run, `scene=NAME method=NAME threads=N tets=N mean_step_ms=X`: the five
-//! paper scenes with both methods over their whole duration, boxes of 1 000 to 200 000 tets
+//! paper scenes with the three methods (`baseline`, `paper`, `xpbd` with 10 substeps unless
+//! `--xpbd-substeps N`) over their whole duration, boxes of 1 000 to 200 000 tets
 //! settling on the ground, and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is
 //! the solver time per 10 ms step summed over the scene's bodies (`SoftBodyStats`), so Bevy's
 //! own overhead is not in it. `--threads N` sizes Bevy's task pools; `--only NAME` runs the
@@ -14,13 +15,14 @@ use std::time::Duration;
 
 use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
 use bevy::prelude::*;
-use bevy_soft_body::core::{VolumeMethod, box_grid};
+use bevy_soft_body::core::{VolumeMethod, XpbdSettings, box_grid};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
 
 struct Args {
     threads: usize,
     only: Option<String>,
+    xpbd_substeps: u32,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -28,6 +30,7 @@ fn parse_args() -> Result<Args, String> {
     let mut parsed = Args {
         threads: 1,
         only: None,
+        xpbd_substeps: 10,
     };
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -40,8 +43,18 @@ fn parse_args() -> Result<Args, String> {
                     .ok_or(format!("--threads: `{n}` is not a thread count"))?;
             }
             "--only" => parsed.only = Some(args.next().ok_or("--only needs a name")?),
+            "--xpbd-substeps" => {
+                let n = args.next().ok_or("--xpbd-substeps needs a number")?;
+                parsed.xpbd_substeps = n
+                    .parse()
+                    .ok()
+                    .filter(|n| (1..=1000).contains(n))
+                    .ok_or(format!("--xpbd-substeps: `{n}` is not 1 to 1000"))?;
+            }
             "--bench" => {} // passed by `cargo bench`-style runners; nothing to do
-            "-h" | "--help" => return Err("usage: bench [--threads N] [--only NAME]".into()),
+            "-h" | "--help" => {
+                return Err("usage: bench [--threads N] [--only NAME] [--xpbd-substeps N]".into());
+            }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
     }
@@ -97,7 +110,13 @@ fn main() {
         }
     };
     let wanted = |name: &str| args.only.as_deref().is_none_or(|o| name.contains(o));
-    let methods = [VolumeMethod::PAPER_BASELINE, VolumeMethod::PAPER_IMPULSES];
+    let methods = [
+        VolumeMethod::PAPER_BASELINE,
+        VolumeMethod::PAPER_IMPULSES,
+        VolumeMethod::Xpbd(XpbdSettings {
+            substeps: args.xpbd_substeps,
+        }),
+    ];
 
     for scene in PaperScene::ALL {
         if !wanted(scene.name()) {

@@ -1,8 +1,9 @@
-//! Runs the paper's five scenes with the baseline and the paper's method through the plugin in
-//! a headless app, and writes the paper's Figure 2 and the numbers behind it.
+//! Runs the paper's five scenes with the baseline, the paper's method and XPBD (the peer most
+//! games use; method `xpbd`, 10 substeps unless `--xpbd-substeps N`) through the plugin in a
+//! headless app, and writes the paper's Figure 2 and the numbers behind it.
 //!
 //! ```text
-//! cargo run --release --all-features --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--verbose]
+//! cargo run --release --all-features --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--xpbd-substeps N] [--verbose]
 //! ```
 //! writes `DIR/summary.csv`, `DIR/<scene>.csv` (time series) and `DIR/volume_error.png`, and
 //! prints the summary table.
@@ -11,7 +12,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use bevy::prelude::Transform;
-use bevy_soft_body::core::VolumeMethod;
+use bevy_soft_body::core::{VolumeMethod, XpbdSettings};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, headless_scene_app};
 use plotters::prelude::*;
@@ -21,6 +22,7 @@ struct Args {
     scenes: Vec<PaperScene>,
     verbose: bool,
     impulses: ImpulseSettings,
+    xpbd_substeps: u32,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -28,6 +30,7 @@ fn parse_args() -> Result<Args, String> {
     let mut scenes = Vec::new();
     let mut verbose = false;
     let mut impulses = ImpulseSettings::PAPER;
+    let mut xpbd_substeps = 10;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -40,6 +43,14 @@ fn parse_args() -> Result<Args, String> {
                 })?);
             }
             "--verbose" => verbose = true,
+            "--xpbd-substeps" => {
+                let n = args.next().ok_or("--xpbd-substeps needs a number")?;
+                xpbd_substeps = n
+                    .parse()
+                    .ok()
+                    .filter(|n| (1..=1000).contains(n))
+                    .ok_or(format!("--xpbd-substeps: `{n}` is not 1 to 1000"))?;
+            }
             "--without" => {
                 // Switch parts of the paper's method off, to see what each one does.
                 for part in args
@@ -60,7 +71,7 @@ fn parse_args() -> Result<Args, String> {
                 }
             }
             "-h" | "--help" => {
-                return Err("usage: paper_figures --out DIR [--scene NAME]... [--without one-ring,per-tet,clamp] [--verbose]".into());
+                return Err("usage: paper_figures --out DIR [--scene NAME]... [--without one-ring,per-tet,clamp] [--xpbd-substeps N] [--verbose]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -73,6 +84,7 @@ fn parse_args() -> Result<Args, String> {
         scenes,
         verbose,
         impulses,
+        xpbd_substeps,
     })
 }
 
@@ -172,6 +184,9 @@ fn main() {
     let methods = [
         VolumeMethod::PAPER_BASELINE,
         VolumeMethod::Impulses(args.impulses),
+        VolumeMethod::Xpbd(XpbdSettings {
+            substeps: args.xpbd_substeps,
+        }),
     ];
     let mut summary = String::from(
         "scene,method,tets,steps,peak_volume_error_pct,final_volume_error_pct,mean_abs_tet_error_pct,max_inverted_tets,mean_step_ms\n",
@@ -292,7 +307,7 @@ fn plot(
             .y_desc("volume error (%)")
             .label_style(("sans-serif", 15))
             .draw()?;
-        for (r, colour) in runs.iter().zip([RED, BLUE]) {
+        for (r, colour) in runs.iter().zip([RED, BLUE, RGBColor(20, 150, 60)]) {
             chart
                 .draw_series(LineSeries::new(
                     r.times.iter().copied().zip(r.error.iter().copied()),

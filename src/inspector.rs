@@ -149,18 +149,19 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
         body.state().mesh().tet_count()
     ));
     let mut m = *body.state().material();
-    let mut paper = matches!(m.method, VolumeMethod::Impulses(_));
+    let mut chosen = m.method.name();
     ui.horizontal(|ui| {
         ui.label("method");
-        ui.radio_value(&mut paper, false, "baseline");
-        ui.radio_value(&mut paper, true, "impulses");
+        ui.radio_value(&mut chosen, "baseline", "baseline");
+        ui.radio_value(&mut chosen, "paper", "impulses");
+        ui.radio_value(&mut chosen, "xpbd", "XPBD");
     });
-    match (&mut m.method, paper) {
-        (VolumeMethod::Impulses(_), false) => m.method = VolumeMethod::PAPER_BASELINE,
-        (VolumeMethod::Baseline { .. }, true) => {
-            m.method = VolumeMethod::Impulses(ImpulseSettings::PAPER)
-        }
-        _ => {}
+    if chosen != m.method.name() {
+        m.method = match chosen {
+            "baseline" => VolumeMethod::PAPER_BASELINE,
+            "xpbd" => VolumeMethod::XPBD,
+            _ => VolumeMethod::Impulses(ImpulseSettings::PAPER),
+        };
     }
     match &mut m.method {
         VolumeMethod::Impulses(s) => {
@@ -174,6 +175,13 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
                 egui::Slider::new(volume_stiffness, 0.0..=20.0)
                     .logarithmic(true)
                     .text("k_V"),
+            );
+        }
+        VolumeMethod::Xpbd(s) => {
+            ui.add(
+                egui::Slider::new(&mut s.substeps, 1..=100)
+                    .logarithmic(true)
+                    .text("substeps"),
             );
         }
     }

@@ -24,7 +24,7 @@ pub enum SoftBodySet {
     Forces,
     /// Contacts on the previewed positions, so the volume passes see them.
     Contacts,
-    /// The one-ring volume impulses.
+    /// The one-ring volume impulses (for the XPBD method, its whole substepped solve).
     OneRing,
     /// The per-tet correction scaled by gamma.
     PerTet,
@@ -334,6 +334,10 @@ fn contact_pass(
         sphere.resolve_static_contacts(h, colliders);
     }
     for (mut body, mut stats) in bodies.iter_mut() {
+        if body.state.material().method.is_xpbd() {
+            // Its contacts are resolved inside its substeps (`xpbd_pass`).
+            continue;
+        }
         let mut contacts = 0;
         timed(&mut body, |s| {
             contacts += s.resolve_sphere_contacts(h, spheres);
@@ -359,13 +363,21 @@ fn resolve_contacts(
     contact_pass(h, &solver.colliders, &mut solver.states, &mut bodies);
 }
 
-fn one_ring(time: Res<Time>, mut spheres: ResMut<SolverSpheres>, mut bodies: Query<&mut SoftBody>) {
+fn one_ring(
+    time: Res<Time>,
+    mut spheres: ResMut<SolverSpheres>,
+    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
-    for mut body in &mut bodies {
-        timed(&mut body, |s| s.one_ring_pass(h, &mut spheres.states));
+    let spheres = &mut *spheres;
+    for (mut body, mut stats) in &mut bodies {
+        timed(&mut body, |s| {
+            stats.contacts += s.xpbd_pass(h, &mut spheres.states, &spheres.colliders);
+            s.one_ring_pass(h, &mut spheres.states);
+        });
     }
 }
 

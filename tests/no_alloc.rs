@@ -42,7 +42,11 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn steps_allocate_nothing_after_the_first() {
-    for method in [VolumeMethod::PAPER_BASELINE, VolumeMethod::PAPER_IMPULSES] {
+    for method in [
+        VolumeMethod::PAPER_BASELINE,
+        VolumeMethod::PAPER_IMPULSES,
+        VolumeMethod::XPBD,
+    ] {
         let mesh = box_grid(UVec3::new(6, 4, 5), Vec3::splat(0.1), Vec3::ZERO).unwrap();
         let material = SoftBodyMaterial {
             method,

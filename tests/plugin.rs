@@ -33,8 +33,12 @@ fn material(method: VolumeMethod) -> SoftBodyMaterial {
 }
 
 #[test]
-fn free_body_conserves_momentum_with_either_method() {
-    for method in [VolumeMethod::PAPER_IMPULSES, VolumeMethod::PAPER_BASELINE] {
+fn free_body_conserves_momentum_with_every_method() {
+    for method in [
+        VolumeMethod::PAPER_IMPULSES,
+        VolumeMethod::PAPER_BASELINE,
+        VolumeMethod::XPBD,
+    ] {
         let mut app = app(Vec3::ZERO);
         let mut body = SoftBody::new(cube(4), material(method)).unwrap();
         // A jumble of velocities: springs, damping and volume passes all act.
@@ -61,11 +65,17 @@ fn free_body_conserves_momentum_with_either_method() {
 
 #[test]
 fn no_particle_ends_a_step_inside_the_ground_or_a_tilted_box() {
+    for method in [VolumeMethod::PAPER_IMPULSES, VolumeMethod::XPBD] {
+        lands_without_penetrating(method);
+    }
+}
+
+fn lands_without_penetrating(method: VolumeMethod) {
     let mut app = app(Vec3::new(0.0, -2.0, 0.0));
     let body = app
         .world_mut()
         .spawn((
-            SoftBody::new(cube(4), material(VolumeMethod::PAPER_IMPULSES)).unwrap(),
+            SoftBody::new(cube(4), material(method)).unwrap(),
             Transform::from_xyz(-0.2, 0.6, -0.2),
         ))
         .id();

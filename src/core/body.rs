@@ -111,6 +111,8 @@ pub struct SoftBodyState {
     /// polynomial need not compute it again; as long as the largest one-ring.
     pub(crate) ring_tets: Vec<RingTet>,
     pub(crate) counters: StepCounters,
+    /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
+    pub(crate) gravity: Vec3,
 }
 
 /// One tet of the one-ring being corrected, at the current previews.
@@ -160,6 +162,7 @@ impl SoftBodyState {
                 (0..n).map(|v| mesh.one_ring(v).len()).max().unwrap_or(0)
             ],
             counters: StepCounters::default(),
+            gravity: Vec3::ZERO,
             mesh,
         };
         body.update_masses();
@@ -356,6 +359,16 @@ impl SoftBodyState {
 
     /// Stage 1: external, spring and (baseline) volume forces change the velocities.
     pub fn apply_forces(&mut self, h: f32, gravity: Vec3) {
+        self.gravity = gravity;
+        if self.material.method.is_xpbd() {
+            // Gravity, springs, damping and drag act inside the substeps (`xpbd_pass`); only
+            // the kinematic particles are set moving here.
+            for &(i, target) in &self.kinematic {
+                let i = i as usize;
+                self.velocities[i] = (target - self.positions[i]) / h;
+            }
+            return;
+        }
         let forces = &mut self.scratch;
         let x = &self.positions;
         let k_d = self.material.distance_stiffness;
@@ -419,7 +432,7 @@ impl SoftBodyState {
     /// force overshoots on light particles (a grid corner weighs 1/40 of an interior particle)
     /// as soon as the damping is strong enough to matter; this cannot, and it conserves
     /// momentum.
-    fn damp_springs(&mut self, h: f32, damping: f32) {
+    pub(crate) fn damp_springs(&mut self, h: f32, damping: f32) {
         let x = &self.positions;
         for &[i, j] in self.mesh.edges() {
             let (i, j) = (i as usize, j as usize);
@@ -465,6 +478,10 @@ impl SoftBodyState {
     /// that one bad particle cannot turn the body, the spheres it touches and the game's
     /// transforms into NaN.
     pub fn integrate_positions(&mut self, h: f32) {
+        if self.material.method.is_xpbd() {
+            // `xpbd_pass` moved the particles through its substeps already.
+            return;
+        }
         for (x, v) in self.positions.iter_mut().zip(&mut self.velocities) {
             let next = *x + h * *v;
             if next.is_finite() {
@@ -549,6 +566,7 @@ impl SoftBodyState {
     pub fn step_free(&mut self, h: f32, gravity: Vec3) {
         self.begin_step();
         self.apply_forces(h, gravity);
+        let _ = self.xpbd_pass(h, &mut [], &[]);
         self.one_ring_pass(h, &mut []);
         self.per_tet_pass(h, &mut []);
         self.apply_plasticity(h);
@@ -571,8 +589,11 @@ impl SoftBodyState {
             for sphere in spheres.iter_mut() {
                 sphere.resolve_static_contacts(h, colliders);
             }
-            body.resolve_sphere_contacts(h, spheres);
-            body.resolve_static_contacts(h, colliders);
+            // XPBD resolves its contacts inside its substeps.
+            if !body.material.method.is_xpbd() {
+                body.resolve_sphere_contacts(h, spheres);
+                body.resolve_static_contacts(h, colliders);
+            }
         };
         self.begin_step();
         self.apply_forces(h, gravity);
@@ -580,6 +601,7 @@ impl SoftBodyState {
             sphere.apply_forces(h, gravity);
         }
         contact_pass(self, spheres);
+        let _ = self.xpbd_pass(h, spheres, colliders);
         self.one_ring_pass(h, spheres);
         self.per_tet_pass(h, spheres);
         self.apply_plasticity(h);

@@ -15,13 +15,16 @@ pub mod tet_mesh;
 pub mod tetgen;
 pub mod tetrahedralize;
 pub mod winding;
+pub mod xpbd;
 
 pub use body::{ParticleIndexError, SoftBodyState, StepCounters, VolumeMetrics};
 pub use contacts::{ColliderInstance, RigidSphereState};
 pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::ImpulseOutcome;
-pub use material::{ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod};
+pub use material::{
+    ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod, XpbdSettings,
+};
 pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
 pub use tet_mesh::{TetMesh, TetMeshError};

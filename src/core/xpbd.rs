@@ -1,0 +1,149 @@
+//! XPBD, the peer the paper's method is measured against (see [`VolumeMethod::Xpbd`]).
+//!
+//! Each step is split into substeps. A substep predicts every particle's position from its
+//! velocity and gravity, projects every edge constraint `C = (L - L0) / L0` with compliance
+//! `1 / k_D` (so that its energy is the springs' `1/2 k_D C^2`) and every tet's volume
+//! constraint `C = (V - V0) / V0` with zero compliance, once each in Gauss-Seidel order (one
+//! iteration; with a fresh multiplier per substep, as "Small Steps" does), derives the velocities
+//! from the motion, resolves contacts on them with the same code the other methods use, and
+//! damps the springs. Momentum is conserved by every projection (the constraint gradients sum
+//! to zero).
+//!
+//! Decisions: gravity is applied per substep (stored by `apply_forces`, which adds no spring
+//! forces for this method); kinematic particles move to their target in equal parts; a rigid
+//! sphere is tested at its position advanced to each substep at its current velocity, and left
+//! where it was for the plugin to integrate; damping and drag act per substep.
+//!
+//! [`VolumeMethod::Xpbd`]: super::material::VolumeMethod::Xpbd
+
+use glam::Vec3;
+
+use super::body::SoftBodyState;
+use super::contacts::{ColliderInstance, RigidSphereState};
+use super::geometry::{signed_volume, volume_gradients};
+use super::material::VolumeMethod;
+
+impl SoftBodyState {
+    /// Stage 3 for [`VolumeMethod::Xpbd`]: the whole step in substeps, contacts included. It
+    /// moves the particles itself, so `integrate_positions` leaves them where they are, and
+    /// the contact passes outside it skip the body. Returns the contacts it resolved (summed
+    /// over the substeps). Does nothing for the other methods.
+    ///
+    /// [`VolumeMethod::Xpbd`]: super::material::VolumeMethod::Xpbd
+    pub fn xpbd_pass(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        colliders: &[ColliderInstance],
+    ) -> u32 {
+        let VolumeMethod::Xpbd(settings) = self.material.method else {
+            return 0;
+        };
+        let mut contacts = 0;
+        let substeps = settings.substeps.max(1);
+        let hs = h / substeps as f32;
+        let gravity = self.gravity;
+        let k_d = self.material.distance_stiffness;
+        let edge_compliance = if k_d > 0.0 { 1.0 / k_d } else { f32::INFINITY };
+        let alpha = edge_compliance / (hs * hs);
+        for k in 0..substeps {
+            // Predict; `previews` holds where each particle started the substep.
+            for i in 0..self.positions.len() {
+                if self.inv_masses[i] > 0.0 {
+                    self.velocities[i] += hs * gravity;
+                }
+                self.previews[i] = self.positions[i];
+                self.positions[i] += hs * self.velocities[i];
+            }
+            if alpha.is_finite() {
+                self.project_edges(alpha);
+            }
+            self.project_volumes();
+            // Velocities from the motion, then contacts on them from the substep's start.
+            for i in 0..self.positions.len() {
+                let v = (self.positions[i] - self.previews[i]) / hs;
+                if v.is_finite() {
+                    self.velocities[i] = v;
+                } else {
+                    self.velocities[i] = Vec3::ZERO;
+                    self.counters.non_finite_velocities += 1;
+                }
+                self.positions[i] = self.previews[i];
+            }
+            for s in spheres.iter_mut() {
+                s.position += (k as f32 * hs) * s.velocity;
+            }
+            contacts += self.resolve_sphere_contacts(hs, spheres);
+            for s in spheres.iter_mut() {
+                s.position -= (k as f32 * hs) * s.velocity;
+            }
+            contacts += self.resolve_static_contacts(hs, colliders);
+            if self.material.damping > 0.0 {
+                self.damp_springs(hs, self.material.damping);
+            }
+            let drag = self.material.linear_damping;
+            if drag > 0.0 {
+                let keep = 1.0 / (1.0 + hs * drag);
+                for (v, &w) in self.velocities.iter_mut().zip(&self.inv_masses) {
+                    if w > 0.0 {
+                        *v *= keep;
+                    }
+                }
+            }
+            for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
+                *x += hs * *v;
+            }
+        }
+        contacts
+    }
+
+    /// One Gauss-Seidel pass over the edge constraints, compliance `alpha` already divided by
+    /// the squared substep.
+    fn project_edges(&mut self, alpha: f32) {
+        let x = &mut self.positions;
+        for (e, &[i, j]) in self.mesh.edges().iter().enumerate() {
+            let (i, j) = (i as usize, j as usize);
+            let (wi, wj) = (self.inv_masses[i], self.inv_masses[j]);
+            if wi + wj == 0.0 {
+                continue;
+            }
+            let d = x[j] - x[i];
+            let length = d.length();
+            let rest = self.spring_rest[e];
+            if length <= f32::EPSILON * rest {
+                continue;
+            }
+            let n = d / length;
+            let c = (length - rest) / rest;
+            let lambda = -c / ((wi + wj) / (rest * rest) + alpha);
+            let push = n * (lambda / rest);
+            x[i] -= push * wi;
+            x[j] += push * wj;
+        }
+    }
+
+    /// One Gauss-Seidel pass over the tets' volume constraints (zero compliance).
+    fn project_volumes(&mut self) {
+        let x = &mut self.positions;
+        for (tet, &v0) in self.mesh.tets().iter().zip(self.mesh.rest_volumes()) {
+            let p = tet.map(|i| x[i as usize]);
+            let c = (signed_volume(&p) - v0) / v0;
+            if c == 0.0 {
+                continue;
+            }
+            let g = volume_gradients(&p);
+            let denominator: f32 = (0..4)
+                .map(|k| self.inv_masses[tet[k] as usize] * g[k].length_squared())
+                .sum::<f32>()
+                / (v0 * v0);
+            if denominator <= 0.0 {
+                continue;
+            }
+            let lambda = -c / denominator;
+            for k in 0..4 {
+                let i = tet[k] as usize;
+                x[i] += g[k] * (self.inv_masses[i] * lambda / v0);
+            }
+        }
+    }
+}
