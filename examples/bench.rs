@@ -6,8 +6,9 @@
 //! paper scenes with the three methods (`baseline`, `paper`, `xpbd` with 10 substeps unless
 //! `--xpbd-substeps N`) over their whole duration, boxes of 1 000 to 200 000 tets
 //! settling on the ground, and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is
-//! the solver time per 10 ms step summed over the scene's bodies (`SoftBodyStats`), so Bevy's
-//! own overhead is not in it. `--threads N` sizes Bevy's task pools; `--only NAME` runs the
+//! the wall-clock time of the plugin's stages per 10 ms step, all bodies together
+//! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
+//! between the stages is not in it. `--threads N` sizes Bevy's task pools; `--only NAME` runs the
 //! scenes whose name contains NAME. Timings are for comparing runs on one machine; the criterion
 //! benches (`cargo bench`) time single steps with statistics.
 
@@ -15,6 +16,7 @@ use std::time::Duration;
 
 use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
 use bevy::prelude::*;
+use bevy_soft_body::SoftBodyStepTime;
 use bevy_soft_body::core::{VolumeMethod, XpbdSettings, box_grid};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
@@ -77,8 +79,9 @@ fn app(threads: usize) -> App {
     app
 }
 
-/// Runs `steps` steps of `app` and returns the tets and the summed mean solver time per step of
-/// its bodies.
+/// Runs `steps` steps of `app` and returns its tets and the mean wall-clock time of the
+/// plugin's stages per step (`SoftBodyStepTime`: all bodies together, in parallel when there are
+/// threads for it).
 fn run(app: &mut App, steps: u32) -> (usize, f64) {
     // The first update only starts the clock.
     app.update();
@@ -86,15 +89,12 @@ fn run(app: &mut App, steps: u32) -> (usize, f64) {
         app.update();
     }
     let world = app.world_mut();
-    let mut bodies = world.query::<(&SoftBody, &SoftBodyStats)>();
-    bodies
+    let tets = world
+        .query::<&SoftBody>()
         .iter(world)
-        .fold((0, 0.0), |(tets, ms), (body, stats)| {
-            (
-                tets + body.state().mesh().tet_count(),
-                ms + stats.mean_step_ms(),
-            )
-        })
+        .map(|b| b.state().mesh().tet_count())
+        .sum();
+    (tets, world.resource::<SoftBodyStepTime>().mean_ms())
 }
 
 fn report(scene: &str, method: &str, threads: usize, tets: usize, ms: f64) {

@@ -23,6 +23,8 @@ pub struct SoftBody {
     /// The scale of the spawn transform, baked into the rest shape at placement.
     pub(crate) rest_scale: Vec3,
     pub(crate) step_time: Duration,
+    /// This body's copy of the rigid spheres during a stage that runs bodies in parallel.
+    pub(crate) spheres: Vec<crate::core::RigidSphereState>,
 }
 
 impl SoftBody {
@@ -33,6 +35,7 @@ impl SoftBody {
             placed: false,
             rest_scale: Vec3::ONE,
             step_time: Duration::ZERO,
+            spheres: Vec::new(),
         })
     }
 

@@ -46,7 +46,7 @@ pub use loading::{
     ObjMeshLoader, SoftBodyAssetPlugin, SoftBodyAssetSet, SoftBodyFromAsset, SoftBodySource,
     TetGenLoader, TetMeshAsset,
 };
-pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyTiming};
+pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyStepTime, SoftBodyTiming};
 #[cfg(feature = "render")]
 pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSet, surface_mesh};
 

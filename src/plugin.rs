@@ -88,6 +88,8 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<DrivenParticles>()
             .register_type::<RigidSphere>()
             .init_resource::<SolverSpheres>()
+            .init_resource::<SoftBodyStepTime>()
+            .register_type::<SoftBodyStepTime>()
             .add_message::<SoftBodyError>();
         if let Some(step) = self.time_step
             && self.schedule == FixedUpdate.intern()
@@ -122,13 +124,6 @@ impl Plugin for SoftBodyPlugin {
             ),
         );
     }
-}
-
-/// Runs `f` on the body's state and adds the time it took to the body's step time.
-fn timed(body: &mut SoftBody, f: impl FnOnce(&mut SoftBodyState)) {
-    let start = Instant::now();
-    f(&mut body.state);
-    body.step_time += start.elapsed();
 }
 
 /// The body's rest mesh scaled by `scale`, or the error that makes that impossible.
@@ -268,7 +263,37 @@ fn prepare(
 pub struct SolverSpheres {
     entities: Vec<Entity>,
     states: Vec<RigidSphereState>,
+    /// The spheres as they were before the stage running now (see [`par_with_spheres`]).
+    before: Vec<RigidSphereState>,
     colliders: Vec<ColliderInstance>,
+}
+
+/// Wall-clock time of the plugin's stages for all bodies together: what a frame pays for the
+/// physics. Bodies are stepped in parallel on Bevy's compute task pool, so with several bodies
+/// and threads this is less than the sum of the bodies' own [`SoftBodyStats::step_ms`].
+#[derive(Resource, Clone, Copy, Debug, Default, Reflect)]
+#[reflect(Resource)]
+pub struct SoftBodyStepTime {
+    /// The last step, in milliseconds.
+    pub last_ms: f64,
+    /// All steps so far, in milliseconds.
+    pub total_ms: f64,
+    /// Steps so far.
+    pub steps: u64,
+    /// The step being timed.
+    #[reflect(ignore)]
+    current: Duration,
+}
+
+impl SoftBodyStepTime {
+    /// Mean wall-clock time per step so far, in milliseconds.
+    pub fn mean_ms(&self) -> f64 {
+        if self.steps == 0 {
+            0.0
+        } else {
+            self.total_ms / self.steps as f64
+        }
+    }
 }
 
 fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState {
@@ -286,11 +311,61 @@ fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState
     }
 }
 
+/// Runs `stage` on every body, in parallel on the compute task pool, timing each body.
+fn par_bodies(
+    bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    stage: impl Fn(&mut SoftBodyState, &mut SoftBodyStats) + Send + Sync,
+) {
+    bodies.par_iter_mut().for_each(|(mut body, mut stats)| {
+        let body = &mut *body;
+        let start = Instant::now();
+        stage(&mut body.state, &mut stats);
+        body.step_time += start.elapsed();
+    });
+}
+
+/// Runs `pass` on every body in parallel, each against its own copy of the spheres as they were
+/// before the stage, then gives each sphere the changes of its velocity that the bodies made, in
+/// query order (the first body's result as it is, the others' as differences). Every body sees
+/// the same spheres whatever ran before it, so the result does not depend on the number of
+/// threads; with one body it is exactly the serial result. Returns nothing: contacts go to the
+/// stats.
+fn par_with_spheres(
+    bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    solver: &mut SolverSpheres,
+    pass: impl Fn(&mut SoftBodyState, &mut [RigidSphereState], &[ColliderInstance]) -> u32 + Send + Sync,
+) {
+    solver.before.clear();
+    solver.before.extend_from_slice(&solver.states);
+    let (before, colliders) = (&solver.before, &solver.colliders);
+    bodies.par_iter_mut().for_each(|(mut body, mut stats)| {
+        let body = &mut *body;
+        let start = Instant::now();
+        body.spheres.clear();
+        body.spheres.extend_from_slice(before);
+        stats.contacts += pass(&mut body.state, &mut body.spheres, colliders);
+        body.step_time += start.elapsed();
+    });
+    if solver.states.is_empty() {
+        return;
+    }
+    for (k, (body, _)) in bodies.iter().enumerate() {
+        for ((sphere, mine), old) in solver.states.iter_mut().zip(&body.spheres).zip(before) {
+            if k == 0 {
+                sphere.velocity = mine.velocity;
+            } else {
+                sphere.velocity += mine.velocity - old.velocity;
+            }
+        }
+    }
+}
+
 fn apply_forces(
     time: Res<Time>,
     gravity: Res<SoftBodyGravity>,
     mut solver_spheres: ResMut<SolverSpheres>,
-    mut bodies: Query<&mut SoftBody>,
+    mut clock: ResMut<SoftBodyStepTime>,
+    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
     spheres: Query<(Entity, &RigidSphere, &Transform)>,
     collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
@@ -298,15 +373,15 @@ fn apply_forces(
     if h <= 0.0 {
         return;
     }
-    for mut body in &mut bodies {
-        timed(&mut body, |s| s.apply_forces(h, gravity.0));
-    }
+    let start = Instant::now();
+    let g = gravity.0;
+    par_bodies(&mut bodies, |s, _| s.apply_forces(h, g));
     let solver_spheres = &mut *solver_spheres;
     solver_spheres.entities.clear();
     solver_spheres.states.clear();
     for (entity, sphere, transform) in &spheres {
         let mut state = sphere_state(sphere, transform);
-        state.apply_forces(h, gravity.0);
+        state.apply_forces(h, g);
         solver_spheres.entities.push(entity);
         solver_spheres.states.push(state);
     }
@@ -319,91 +394,101 @@ fn apply_forces(
             collider.friction,
         ));
     }
+    clock.current += start.elapsed();
 }
 
 /// One contact pass over everything: spheres against static colliders, then particles against
 /// spheres, then particles against static colliders (last, so that no particle is left inside
-/// the ground by a sphere pushing it).
+/// the ground by a sphere pushing it). XPBD bodies resolve their contacts in their substeps.
 fn contact_pass(
     h: f32,
-    colliders: &[ColliderInstance],
-    spheres: &mut [RigidSphereState],
+    solver: &mut SolverSpheres,
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
 ) {
-    for sphere in spheres.iter_mut() {
-        sphere.resolve_static_contacts(h, colliders);
+    for sphere in solver.states.iter_mut() {
+        sphere.resolve_static_contacts(h, &solver.colliders);
     }
-    for (mut body, mut stats) in bodies.iter_mut() {
-        if body.state.material().method.is_xpbd() {
-            // Its contacts are resolved inside its substeps (`xpbd_pass`).
-            continue;
+    par_with_spheres(bodies, solver, |s, spheres, colliders| {
+        if s.material().method.is_xpbd() {
+            return 0;
         }
-        let mut contacts = 0;
-        timed(&mut body, |s| {
-            contacts += s.resolve_sphere_contacts(h, spheres);
-            contacts += s.resolve_static_contacts(h, colliders);
-        });
-        stats.contacts += contacts;
-    }
+        s.resolve_sphere_contacts(h, spheres) + s.resolve_static_contacts(h, colliders)
+    });
 }
 
 fn resolve_contacts(
     time: Res<Time>,
     mut solver: ResMut<SolverSpheres>,
+    mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
+    let start = Instant::now();
     for (_, mut stats) in &mut bodies {
         stats.contacts = 0;
     }
-    let solver = &mut *solver;
-    contact_pass(h, &solver.colliders, &mut solver.states, &mut bodies);
+    contact_pass(h, &mut solver, &mut bodies);
+    clock.current += start.elapsed();
 }
 
 fn one_ring(
     time: Res<Time>,
-    mut spheres: ResMut<SolverSpheres>,
+    mut solver: ResMut<SolverSpheres>,
+    mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
-    let spheres = &mut *spheres;
-    for (mut body, mut stats) in &mut bodies {
-        timed(&mut body, |s| {
-            stats.contacts += s.xpbd_pass(h, &mut spheres.states, &spheres.colliders);
-            s.one_ring_pass(h, &mut spheres.states);
-        });
-    }
+    let start = Instant::now();
+    par_with_spheres(&mut bodies, &mut solver, |s, spheres, colliders| {
+        let contacts = s.xpbd_pass(h, spheres, colliders);
+        s.one_ring_pass(h, spheres);
+        contacts
+    });
+    clock.current += start.elapsed();
 }
 
-fn per_tet(time: Res<Time>, mut spheres: ResMut<SolverSpheres>, mut bodies: Query<&mut SoftBody>) {
+fn per_tet(
+    time: Res<Time>,
+    mut solver: ResMut<SolverSpheres>,
+    mut clock: ResMut<SoftBodyStepTime>,
+    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
-    for mut body in &mut bodies {
-        timed(&mut body, |s| s.per_tet_pass(h, &mut spheres.states));
-    }
+    let start = Instant::now();
+    par_with_spheres(&mut bodies, &mut solver, |s, spheres, _| {
+        s.per_tet_pass(h, spheres);
+        0
+    });
+    clock.current += start.elapsed();
 }
 
-fn plasticity(time: Res<Time>, mut bodies: Query<&mut SoftBody>) {
+fn plasticity(
+    time: Res<Time>,
+    mut clock: ResMut<SoftBodyStepTime>,
+    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
-    for mut body in &mut bodies {
-        timed(&mut body, |s| s.apply_plasticity(h));
-    }
+    let start = Instant::now();
+    par_bodies(&mut bodies, |s, _| s.apply_plasticity(h));
+    clock.current += start.elapsed();
 }
 
 fn integrate(
     time: Res<Time>,
     mut solver_spheres: ResMut<SolverSpheres>,
+    mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
     mut spheres: Query<(&mut RigidSphere, &mut Transform), Without<StaticCollider>>,
 ) {
@@ -411,17 +496,13 @@ fn integrate(
     if h <= 0.0 {
         return;
     }
+    let start = Instant::now();
     let solver_spheres = &mut *solver_spheres;
-    contact_pass(
-        h,
-        &solver_spheres.colliders,
-        &mut solver_spheres.states,
-        &mut bodies,
-    );
-    for (mut body, mut stats) in &mut bodies {
-        timed(&mut body, |s| s.integrate_positions(h));
+    contact_pass(h, solver_spheres, &mut bodies);
+    par_bodies(&mut bodies, |s, stats| {
+        s.integrate_positions(h);
         stats.steps += 1;
-    }
+    });
     for (entity, state) in solver_spheres
         .entities
         .iter()
@@ -433,22 +514,29 @@ fn integrate(
             transform.translation = state.position;
         }
     }
+    clock.current += start.elapsed();
+    clock.last_ms = clock.current.as_secs_f64() * 1e3;
+    clock.total_ms += clock.last_ms;
+    clock.steps += 1;
+    clock.current = Duration::ZERO;
 }
 
 fn writeback(mut bodies: Query<(&SoftBody, &mut SoftBodyStats, &mut Transform)>) {
-    for (body, mut stats, mut transform) in &mut bodies {
-        if !body.placed {
-            continue;
-        }
-        let m = body.state.volume_metrics();
-        stats.volume_error_pct = m.volume_error_pct;
-        stats.peak_volume_error_pct = stats.peak_volume_error_pct.max(m.volume_error_pct.abs());
-        stats.mean_abs_tet_error_pct = m.mean_abs_tet_error_pct;
-        stats.inverted_tets = m.inverted_tets;
-        stats.max_inverted_tets = stats.max_inverted_tets.max(m.inverted_tets);
-        stats.step_ms = body.step_time.as_secs_f64() * 1e3;
-        stats.total_step_ms += stats.step_ms;
-        stats.counters = body.state.counters();
-        transform.translation = body.state.centre_of_mass();
-    }
+    bodies
+        .par_iter_mut()
+        .for_each(|(body, mut stats, mut transform)| {
+            if !body.placed {
+                return;
+            }
+            let m = body.state.volume_metrics();
+            stats.volume_error_pct = m.volume_error_pct;
+            stats.peak_volume_error_pct = stats.peak_volume_error_pct.max(m.volume_error_pct.abs());
+            stats.mean_abs_tet_error_pct = m.mean_abs_tet_error_pct;
+            stats.inverted_tets = m.inverted_tets;
+            stats.max_inverted_tets = stats.max_inverted_tets.max(m.inverted_tets);
+            stats.step_ms = body.step_time.as_secs_f64() * 1e3;
+            stats.total_step_ms += stats.step_ms;
+            stats.counters = body.state.counters();
+            transform.translation = body.state.centre_of_mass();
+        });
 }

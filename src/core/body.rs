@@ -113,6 +113,8 @@ pub struct SoftBodyState {
     pub(crate) counters: StepCounters,
     /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
     pub(crate) gravity: Vec3,
+    /// Sphere positions saved during an XPBD substep (reused, so steps do not allocate).
+    pub(crate) sphere_positions: Vec<Vec3>,
 }
 
 /// One tet of the one-ring being corrected, at the current previews.
@@ -163,6 +165,7 @@ impl SoftBodyState {
             ],
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
+            sphere_positions: Vec::new(),
             mesh,
         };
         body.update_masses();

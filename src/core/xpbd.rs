@@ -70,12 +70,15 @@ impl SoftBodyState {
                 }
                 self.positions[i] = self.previews[i];
             }
+            // Each sphere where it is at this substep's start, then back exactly where it was.
+            self.sphere_positions.clear();
             for s in spheres.iter_mut() {
+                self.sphere_positions.push(s.position);
                 s.position += (k as f32 * hs) * s.velocity;
             }
             contacts += self.resolve_sphere_contacts(hs, spheres);
-            for s in spheres.iter_mut() {
-                s.position -= (k as f32 * hs) * s.velocity;
+            for (s, &start) in spheres.iter_mut().zip(&self.sphere_positions) {
+                s.position = start;
             }
             contacts += self.resolve_static_contacts(hs, colliders);
             if self.material.damping > 0.0 {
