@@ -1,0 +1,106 @@
+//! Results do not depend on the number of threads: the same scene of several bodies sharing a
+//! sphere, stepped with 1, 2 and 4 threads in Bevy's task pools, ends bit for bit the same. The
+//! pools are global to a process, so each thread count runs in a child process (this test binary
+//! again, told by an environment variable what to do).
+
+use std::process::Command;
+use std::time::Duration;
+
+use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
+use bevy::prelude::*;
+use bevy_soft_body::core::{VolumeMethod, box_grid};
+use bevy_soft_body::prelude::*;
+
+const CHILD: &str = "BEVY_SOFT_BODY_THREADS_CHILD";
+
+/// Steps four bodies (two methods), a sphere landing across two of them and the ground, and
+/// returns every particle's and the sphere's final position, as bits.
+fn simulate(threads: usize) -> Vec<u32> {
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins.set(TaskPoolPlugin {
+            task_pool_options: TaskPoolOptions::with_num_threads(threads),
+        }),
+        SoftBodyPlugin::default(),
+    ))
+    .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+        Duration::from_millis(10),
+    ))
+    .insert_resource(SoftBodyGravity(Vec3::new(0.0, -2.0, 0.0)));
+    let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO)
+        .unwrap()
+        .into();
+    for k in 0..4 {
+        let method = if k % 2 == 0 {
+            VolumeMethod::PAPER_IMPULSES
+        } else {
+            VolumeMethod::XPBD
+        };
+        let material = SoftBodyMaterial {
+            method,
+            ..Default::default()
+        };
+        app.world_mut().spawn((
+            SoftBody::new(mesh.clone(), material).unwrap(),
+            Transform::from_xyz(k as f32 * 0.45, 0.05, 0.0),
+        ));
+    }
+    // Lands on the first two bodies at once.
+    app.world_mut().spawn((
+        RigidSphere::new(0.2, 30.0),
+        Transform::from_xyz(0.42, 0.75, 0.2),
+    ));
+    app.world_mut()
+        .spawn((StaticCollider::ground(0.6), Transform::default()));
+    for _ in 0..120 {
+        app.update();
+    }
+    let world = app.world_mut();
+    let mut bits = Vec::new();
+    for body in world.query::<&SoftBody>().iter(world) {
+        for p in body.state().positions() {
+            bits.extend(p.to_array().map(f32::to_bits));
+        }
+    }
+    for (_, t) in world.query::<(&RigidSphere, &Transform)>().iter(world) {
+        bits.extend(t.translation.to_array().map(f32::to_bits));
+    }
+    bits
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    if let Ok(threads) = std::env::var(CHILD) {
+        let bits = simulate(threads.parse().unwrap());
+        let hash = bits.iter().fold(0xcbf29ce484222325u64, |h, &b| {
+            (h ^ b as u64).wrapping_mul(0x100000001b3)
+        });
+        println!("result {} {hash:016x}", bits.len());
+        return;
+    }
+    let run = |threads: usize| {
+        let out = Command::new(std::env::current_exe().unwrap())
+            .args([
+                "results_do_not_depend_on_the_thread_count",
+                "--exact",
+                "--nocapture",
+            ])
+            .env(CHILD, threads.to_string())
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+        assert!(
+            out.status.success(),
+            "child with {threads} threads failed: {stdout}"
+        );
+        stdout
+            .lines()
+            .find_map(|l| l.strip_prefix("result ").map(str::to_owned))
+            .unwrap_or_else(|| panic!("no result from the child with {threads} threads"))
+    };
+    let one = run(1);
+    assert!(one.split(' ').next().unwrap().parse::<usize>().unwrap() > 1000);
+    for threads in [2, 4] {
+        assert_eq!(run(threads), one, "{threads} threads differ from one");
+    }
+}
