@@ -63,12 +63,16 @@ fn parse_args() -> Result<Args, String> {
     Ok(parsed)
 }
 
-/// A headless app with `threads` threads in Bevy's task pools, stepping 10 ms per update.
+/// A headless app with `threads` threads in Bevy's compute task pool (where the systems and the
+/// bodies run; the IO and async pools get one each besides), stepping 10 ms per update.
 fn app(threads: usize) -> App {
+    let mut options = TaskPoolOptions::with_num_threads(threads + 2);
+    options.compute.min_threads = threads;
+    options.compute.max_threads = threads;
     let mut app = App::new();
     app.add_plugins((
         MinimalPlugins.set(TaskPoolPlugin {
-            task_pool_options: TaskPoolOptions::with_num_threads(threads),
+            task_pool_options: options,
         }),
         SoftBodyPlugin::default(),
         PaperScenesPlugin,

@@ -16,10 +16,14 @@ const CHILD: &str = "BEVY_SOFT_BODY_THREADS_CHILD";
 /// Steps four bodies (two methods), a sphere landing across two of them and the ground, and
 /// returns every particle's and the sphere's final position, as bits.
 fn simulate(threads: usize) -> Vec<u32> {
+    // `threads` threads in the compute pool, where the systems and the bodies run.
+    let mut options = TaskPoolOptions::with_num_threads(threads + 2);
+    options.compute.min_threads = threads;
+    options.compute.max_threads = threads;
     let mut app = App::new();
     app.add_plugins((
         MinimalPlugins.set(TaskPoolPlugin {
-            task_pool_options: TaskPoolOptions::with_num_threads(threads),
+            task_pool_options: options,
         }),
         SoftBodyPlugin::default(),
     ))
