@@ -20,6 +20,7 @@ use glam::Vec3;
 
 use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients};
+use super::impulses::RingWork;
 use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
 use super::tet_mesh::TetMesh;
 
@@ -107,27 +108,13 @@ pub struct SoftBodyState {
     pub(crate) contact_sphere: Vec<u32>,
     /// The particles with a non-zero entry in `contact_normals`, to clear them cheaply.
     pub(crate) touching: Vec<u32>,
-    /// What the ring impulse being computed knows of each tet of its one-ring, so that its
-    /// polynomial need not compute it again; as long as the largest one-ring.
-    pub(crate) ring_tets: Vec<RingTet>,
+    /// Working arrays of the ring impulse being computed, sized for the largest one-ring.
+    pub(crate) ring_work: RingWork,
     pub(crate) counters: StepCounters,
     /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
     pub(crate) gravity: Vec3,
     /// Sphere positions saved during an XPBD substep (reused, so steps do not allocate).
     pub(crate) sphere_positions: Vec<Vec3>,
-}
-
-/// One tet of the one-ring being corrected, at the current previews.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct RingTet {
-    /// Its signed volume.
-    pub(crate) volume: f32,
-    /// Its volume error `C_t`.
-    pub(crate) error: f32,
-    /// Its volume gradients.
-    pub(crate) gradients: [Vec3; 4],
-    /// Its edge vectors `x_i - x_d`, i = a, b, c.
-    pub(crate) edges: [Vec3; 3],
 }
 
 impl SoftBodyState {
@@ -159,10 +146,7 @@ impl SoftBodyState {
             contact_kept: vec![0.0; n],
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::with_capacity(n),
-            ring_tets: vec![
-                RingTet::default();
-                (0..n).map(|v| mesh.one_ring(v).len()).max().unwrap_or(0)
-            ],
+            ring_work: RingWork::for_mesh(&mesh),
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
             sphere_positions: Vec::new(),

@@ -7,7 +7,7 @@ use super::roots::Cubic;
 
 /// `1 / 6`, multiplied by rather than divided by: a division costs several multiplications in
 /// the hottest loops of the volume passes.
-const SIXTH: f32 = 1.0 / 6.0;
+pub(crate) const SIXTH: f32 = 1.0 / 6.0;
 
 /// `u . (v x w)`.
 #[inline]

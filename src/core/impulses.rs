@@ -29,13 +29,14 @@
 //! [`StepCounters`]: super::body::StepCounters
 
 use glam::Vec3;
+use wide::{CmpGt, f32x4};
 
-use super::body::{RingTet, SoftBodyState};
+use super::body::SoftBodyState;
 use super::contacts::RigidSphereState;
 use super::geometry::{
-    signed_volume, volume_gradients, volume_polynomial, volume_polynomial_with_edges,
-    volume_polynomial_with_gradients,
+    SIXTH, signed_volume, volume_gradients, volume_polynomial, volume_polynomial_with_gradients,
 };
+use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::roots::{Cubic, first_crossing, monotone_root};
 use super::tet_mesh::TetMesh;
@@ -148,6 +149,43 @@ fn drift_bound(m: f32, grad: f32, l: f32) -> f32 {
     m * grad + 2.0 * l * m * m + (4.0 / 3.0) * m * m * m
 }
 
+/// Working arrays of one ring impulse, sized for the mesh's largest one-ring so that steps do
+/// not allocate: the ring's particles in the order of [`TetMesh::ring_vertices`], and its tets
+/// four to an entry.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct RingWork {
+    previews: Vec<Vec3>,
+    inv_masses: Vec<f32>,
+    /// The summed directions `D_i`.
+    directions: Vec<Vec3>,
+    tets: Vec<RingLanes>,
+}
+
+impl RingWork {
+    /// Arrays for the largest one-ring of `mesh`.
+    pub(crate) fn for_mesh(mesh: &TetMesh) -> RingWork {
+        let n = mesh.max_ring_vertices();
+        RingWork {
+            previews: vec![Vec3::ZERO; n],
+            inv_masses: vec![0.0; n],
+            directions: vec![Vec3::ZERO; n],
+            tets: vec![RingLanes::default(); mesh.max_one_ring().div_ceil(LANES)],
+        }
+    }
+}
+
+/// What a ring impulse knows of four tets of its ring at the current previews.
+#[derive(Clone, Copy, Debug, Default)]
+struct RingLanes {
+    /// Edge vectors `x_i - x_d`, i = a, b, c.
+    edges: [Vec3x4; 3],
+    /// Volume gradients of a, b and c (d's is minus their sum).
+    gradients: [Vec3x4; 3],
+    volume: f32x4,
+    /// The volume error `C_t`.
+    error: f32x4,
+}
+
 /// Which clamp regions a pass uses.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum ClampRegions {
@@ -231,6 +269,10 @@ impl SoftBodyState {
     /// The one-ring impulse of vertex `p`: every particle of the ring moves by `s * D_i`, where
     /// `D_i` sums the directions of the ring's tets that contain it, and `s` is the smallest
     /// positive root of `sum_t V_t(s) = sum_t V0_t`. Needs `refresh_previews` first.
+    ///
+    /// The ring's particles are gathered into [`RingWork`] first and its tets are computed four
+    /// at a time in SIMD lanes ([`Vec3x4`]), with the scalar code's operations in the scalar
+    /// code's order, so the result is bit for bit the same as one tet at a time.
     pub(crate) fn ring_impulse(
         &mut self,
         mesh: &TetMesh,
@@ -241,99 +283,150 @@ impl SoftBodyState {
         spheres: &mut [RigidSphereState],
     ) -> ImpulseOutcome {
         let ring = mesh.one_ring(p);
+        let corners = mesh.ring_corners(p);
         let vertices = mesh.ring_vertices(p);
+        let rest_volumes = mesh.rest_volumes();
+        let mut work = std::mem::take(&mut self.ring_work);
+        for (k, &i) in vertices.iter().enumerate() {
+            work.previews[k] = self.previews[i as usize];
+        }
+        // The tets' volumes, errors, edges and gradients at the previews, four at a time.
+        let groups = ring.len().div_ceil(LANES);
         let mut rest = 0.0f64;
-        let mut any = false;
-        let mut outside_tolerance = false;
-        for (slot, &t) in ring.iter().enumerate() {
-            let tet = mesh.tets()[t as usize];
-            let xp = tet.map(|i| self.preview(i));
-            let v0 = mesh.rest_volumes()[t as usize];
-            rest += v0 as f64;
-            let g = volume_gradients(&xp);
-            let edges = [xp[0] - xp[3], xp[1] - xp[3], xp[2] - xp[3]];
+        let mut outside_tolerance = f32x4::ZERO;
+        for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
+            let mut v0 = [0.0f32; LANES];
+            let mut tet_corners = [[0u16; 4]; LANES];
+            for l in 0..LANES {
+                let j = LANES * group + l;
+                if j < ring.len() {
+                    v0[l] = rest_volumes[ring[j] as usize];
+                    rest += v0[l] as f64;
+                    tet_corners[l] = corners[j];
+                }
+            }
+            // Unused lanes hold a tet collapsed onto the centre: zero edges, volume and error.
+            let x = |k: usize| Vec3x4::from_vecs(tet_corners.map(|c| work.previews[c[k] as usize]));
+            let xd = x(3);
+            let edges = [x(0) - xd, x(1) - xd, x(2) - xd];
+            let sixth = f32x4::splat(SIXTH);
+            let gradients = [
+                edges[1].cross(edges[2]).scale(sixth),
+                edges[2].cross(edges[0]).scale(sixth),
+                edges[0].cross(edges[1]).scale(sixth),
+            ];
             // The volume from the gradient already at hand: `ga = eb x ec / 6`.
-            let volume = edges[0].dot(g[0]);
+            let volume = edges[0].dot(gradients[0]);
+            let v0 = f32x4::new(v0);
             let error = volume - v0;
-            outside_tolerance |= error.abs() > tolerance * v0;
-            self.ring_tets[slot] = RingTet {
+            outside_tolerance |= error.abs().cmp_gt(f32x4::splat(tolerance) * v0);
+            *lanes = RingLanes {
+                edges,
+                gradients,
                 volume,
                 error,
-                gradients: g,
-                edges,
             };
         }
         // Most rings of a body near rest are within tolerance: they stop here, before any
         // direction is written.
-        if !outside_tolerance {
+        if !outside_tolerance.any() {
+            self.ring_work = work;
             return ImpulseOutcome::Skipped;
         }
-        // The stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
+        for (k, &i) in vertices.iter().enumerate() {
+            work.inv_masses[k] = self.inv_masses[i as usize];
+            work.directions[k] = Vec3::ZERO;
+        }
+        // Each tet's directions `d_i = -w_i C_t grad_i`, summed per particle in ring order; the
+        // stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
         let mut stiffest = 0.0f32;
-        for (slot, &t) in ring.iter().enumerate() {
-            let RingTet {
-                error: c,
-                gradients: g,
-                ..
-            } = self.ring_tets[slot];
-            if c == 0.0 {
-                continue;
-            }
-            let tet = mesh.tets()[t as usize];
-            let mut stiffness = 0.0f32;
+        let mut any = false;
+        for (group, lanes) in work.tets[..groups].iter().enumerate() {
+            let tet_corners: [[u16; 4]; LANES] =
+                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
+            let [ga, gb, gc] = lanes.gradients;
+            let g = [ga, gb, gc, -(ga + gb + gc)];
+            let mut stiffness = f32x4::ZERO;
+            let mut d = [Vec3x4::ZERO; 4];
             for k in 0..4 {
-                let i = tet[k] as usize;
-                let w = self.inv_masses[i];
-                stiffness += w * g[k].length_squared();
-                let d = -w * c * g[k];
-                self.scratch[i] += d;
-                any |= d != Vec3::ZERO;
+                let w = f32x4::new(tet_corners.map(|c| work.inv_masses[c[k] as usize]));
+                stiffness = stiffness + w * g[k].length_squared();
+                d[k] = g[k].scale(-w * lanes.error);
             }
-            stiffest = stiffest.max(stiffness);
+            let (errors, stiffness) = (lanes.error.to_array(), stiffness.to_array());
+            let d = d.map(Vec3x4::to_vecs);
+            for l in 0..LANES {
+                if errors[l] == 0.0 {
+                    continue;
+                }
+                stiffest = stiffest.max(stiffness[l]);
+                for k in 0..4 {
+                    work.directions[tet_corners[l][k] as usize] += d[k][l];
+                    any |= d[k][l] != Vec3::ZERO;
+                }
+            }
         }
         let tet_step = 1.0 / stiffest as f64;
         if !any {
-            self.clear_directions(vertices);
+            self.ring_work = work;
             return ImpulseOutcome::Skipped;
         }
         if !self.touching.is_empty() {
-            for &i in vertices {
-                let i = i as usize;
-                self.scratch[i] = self.constrain_direction(i, self.scratch[i]);
+            for (k, &i) in vertices.iter().enumerate() {
+                work.directions[k] = self.constrain_direction(i as usize, work.directions[k]);
             }
         }
+        // The ring's volume polynomial, summed tet by tet in ring order.
         let mut poly: Cubic = [-rest, 0.0, 0.0, 0.0];
-        for (slot, &t) in ring.iter().enumerate() {
-            let tet = mesh.tets()[t as usize];
-            let d = tet.map(|i| self.scratch[i as usize]);
-            let RingTet {
-                volume,
-                gradients,
-                edges,
-                ..
-            } = &self.ring_tets[slot];
-            let c = volume_polynomial_with_edges(edges, *volume, gradients, &d);
-            for k in 0..4 {
-                poly[k] += c[k];
+        let sixth = 1.0 / 6.0;
+        for (group, lanes) in work.tets[..groups].iter().enumerate() {
+            let tet_corners: [[u16; 4]; LANES] =
+                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
+            let dir =
+                |k: usize| Vec3x4::from_vecs(tet_corners.map(|c| work.directions[c[k] as usize]));
+            let dd = dir(3);
+            let (fa, fb, fc) = (dir(0) - dd, dir(1) - dd, dir(2) - dd);
+            let [ga, gb, gc] = lanes.gradients;
+            let [ea, eb, ec] = lanes.edges;
+            let c1 = ga.dot(fa) + gb.dot(fb) + gc.dot(fc);
+            let fbc = fb.cross(fc);
+            let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
+            let c3 = fa.dot(fbc);
+            let (volume, c1, c2, c3) = (
+                lanes.volume.to_array(),
+                c1.to_array(),
+                c2.to_array(),
+                c3.to_array(),
+            );
+            for l in 0..LANES.min(ring.len() - LANES * group) {
+                poly[0] += volume[l] as f64;
+                poly[1] += c1[l] as f64;
+                poly[2] += c2[l] as f64 * sixth;
+                poly[3] += c3[l] as f64 * sixth;
             }
         }
         let Some(root) = monotone_root(&poly) else {
             self.counters.rings_without_root += 1;
-            self.clear_directions(vertices);
+            self.ring_work = work;
             return ImpulseOutcome::NoRoot;
         };
         let limited = root.min(RING_STEP_LIMIT * tet_step);
         let mut step = limited;
         if clamp {
-            let largest = vertices
+            let largest = work.directions[..vertices.len()]
                 .iter()
-                .map(|&i| self.scratch[i as usize].length_squared())
+                .map(|d| d.length_squared())
                 .fold(0.0f32, larger);
             if let Some(drift) = self.clamp_drift(p, vertices, step as f32 * largest.sqrt()) {
+                // The walk reads directions by particle: lend them to `scratch` for it.
+                for (k, &i) in vertices.iter().enumerate() {
+                    self.scratch[i as usize] = work.directions[k];
+                }
                 self.set_move_lengths(vertices, true);
                 step =
                     self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step, drift);
                 self.set_move_lengths(vertices, false);
+                self.clear_directions(vertices);
             } else {
                 self.counters.clamps_skipped += 1;
             }
@@ -342,11 +435,10 @@ impl SoftBodyState {
         self.counters.rings_corrected += 1;
         self.counters.rings_clamped += clamped as u32;
         let scale = (step / h as f64) as f32;
-        for &i in vertices {
-            let i = i as usize;
-            self.apply_velocity_change(i, scale * self.scratch[i], h, spheres);
-            self.scratch[i] = Vec3::ZERO;
+        for (k, &i) in vertices.iter().enumerate() {
+            self.apply_velocity_change(i as usize, scale * work.directions[k], h, spheres);
         }
+        self.ring_work = work;
         ImpulseOutcome::Applied {
             step,
             root,

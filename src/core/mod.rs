@@ -7,6 +7,7 @@ pub mod embedding;
 pub mod geometry;
 pub mod grid;
 pub mod impulses;
+pub mod lanes;
 pub mod material;
 pub mod obj;
 pub mod roots;

@@ -31,6 +31,12 @@ impl Csr {
         Csr { offsets, items }
     }
 
+    /// Where row `i` lies in the flat list of items.
+    #[inline]
+    fn range(&self, i: usize) -> std::ops::Range<usize> {
+        self.offsets[i] as usize..self.offsets[i + 1] as usize
+    }
+
     /// Row `i`.
     #[inline]
     pub fn row(&self, i: usize) -> &[u32] {
@@ -101,6 +107,14 @@ pub enum TetMeshError {
         /// Its longest edge.
         longest_edge: f32,
     },
+    /// A vertex's one-ring touches more vertices than the ring impulse can number locally.
+    #[error("vertex {vertex} has {ring_vertices} vertices in its one-ring, more than 65536")]
+    RingTooLarge {
+        /// The vertex.
+        vertex: usize,
+        /// How many vertices its one-ring has.
+        ring_vertices: usize,
+    },
     /// A vertex belongs to no tet: it would be a particle without volume, which is almost
     /// certainly a mistake in the input.
     #[error("vertex {vertex} belongs to no tet")]
@@ -125,6 +139,10 @@ pub struct TetMesh {
     one_rings: Csr,
     ring_vertices: Csr,
     ring_border_tets: Csr,
+    /// For each tet of each one-ring (in the order of `one_rings`), the positions of its four
+    /// vertices in that ring's `ring_vertices`: the ring impulse works on the ring's particles
+    /// gathered in one small array, not on the whole body's.
+    ring_corners: Vec<[u16; 4]>,
     tet_neighbours: Csr,
     reoriented_tets: usize,
 }
@@ -246,6 +264,23 @@ impl TetMesh {
         }
         let ring_vertices = Csr::from_pairs(n, &ring_pairs);
         let ring_border_tets = Csr::from_pairs(n, &border_pairs);
+        let mut local = vec![0u16; n];
+        let mut ring_corners = Vec::with_capacity(4 * tets.len());
+        for p in 0..n {
+            let row = ring_vertices.row(p);
+            if row.len() > u16::MAX as usize + 1 {
+                return Err(TetMeshError::RingTooLarge {
+                    vertex: p,
+                    ring_vertices: row.len(),
+                });
+            }
+            for (k, &i) in row.iter().enumerate() {
+                local[i as usize] = k as u16;
+            }
+            for &t in one_rings.row(p) {
+                ring_corners.push(tets[t as usize].map(|i| local[i as usize]));
+            }
+        }
 
         // Tets sharing at least one vertex with each tet.
         let mut stamp_t = vec![u32::MAX; tets.len()];
@@ -272,6 +307,7 @@ impl TetMesh {
             one_rings,
             ring_vertices,
             ring_border_tets,
+            ring_corners,
             tet_neighbours,
             reoriented_tets,
         })
@@ -312,6 +348,29 @@ impl TetMesh {
     #[inline]
     pub fn ring_vertices(&self, p: usize) -> &[u32] {
         self.ring_vertices.row(p)
+    }
+
+    /// For each tet of [`TetMesh::one_ring`]`(p)`, the indices of its four vertices in
+    /// [`TetMesh::ring_vertices`]`(p)`.
+    #[inline]
+    pub fn ring_corners(&self, p: usize) -> &[[u16; 4]] {
+        &self.ring_corners[self.one_rings.range(p)]
+    }
+
+    /// The largest number of vertices in any one-ring.
+    pub fn max_ring_vertices(&self) -> usize {
+        (0..self.vertex_count())
+            .map(|p| self.ring_vertices(p).len())
+            .max()
+            .unwrap_or(0)
+    }
+
+    /// The largest number of tets in any one-ring.
+    pub fn max_one_ring(&self) -> usize {
+        (0..self.vertex_count())
+            .map(|p| self.one_ring(p).len())
+            .max()
+            .unwrap_or(0)
     }
 
     /// Tets outside the one-ring of `p` that share a vertex with it: their volume changes when
