@@ -33,9 +33,7 @@ use wide::{CmpGt, f32x4};
 
 use super::body::SoftBodyState;
 use super::contacts::RigidSphereState;
-use super::geometry::{
-    SIXTH, signed_volume, volume_gradients, volume_polynomial, volume_polynomial_with_gradients,
-};
+use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_with_edges};
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::roots::{Cubic, first_crossing, monotone_root};
@@ -464,12 +462,18 @@ impl SoftBodyState {
         let tet = mesh.tets()[t];
         let v0 = mesh.rest_volumes()[t];
         let xp = tet.map(|i| self.preview(i));
-        let volume = signed_volume(&xp);
+        let (ea, eb, ec) = (xp[0] - xp[3], xp[1] - xp[3], xp[2] - xp[3]);
+        // `signed_volume`, keeping the cross product that is also a's gradient.
+        let ebc = eb.cross(ec);
+        let volume = ea.dot(ebc) * SIXTH;
         let c = volume - v0;
         if c == 0.0 || c.abs() <= tolerance * v0 {
             return ImpulseOutcome::Skipped;
         }
-        let g = volume_gradients(&xp);
+        let ga = ebc * SIXTH;
+        let gb = ec.cross(ea) * SIXTH;
+        let gc = ea.cross(eb) * SIXTH;
+        let g = [ga, gb, gc, -(ga + gb + gc)];
         let d: [Vec3; 4] = std::array::from_fn(|k| {
             let i = tet[k] as usize;
             self.constrain_direction(i, -self.inv_masses[i] * c * g[k])
@@ -477,7 +481,7 @@ impl SoftBodyState {
         if d.iter().all(|&x| x == Vec3::ZERO) {
             return ImpulseOutcome::Skipped;
         }
-        let mut poly = volume_polynomial_with_gradients(&xp, volume, &g, &d);
+        let mut poly = volume_polynomial_with_edges(&[ea, eb, ec], volume, &g, &d);
         poly[0] -= v0 as f64;
         let Some(root) = monotone_root(&poly) else {
             self.counters.tets_without_root += 1;
@@ -537,27 +541,56 @@ impl SoftBodyState {
         b.tet_slack.resize(mesh.tet_count(), 0.0);
         b.tet_grad.resize(mesh.tet_count(), 0.0);
         b.tet_reach.resize(mesh.tet_count(), 0.0);
-        for (t, (tet, &v0)) in mesh.tets().iter().zip(mesh.rest_volumes()).enumerate() {
-            let xp = tet.map(|i| self.previews[i as usize]);
-            let g = volume_gradients(&xp);
-            let volume = (xp[0] - xp[3]).dot(g[0]);
-            let eps = CLAMP_FRACTION * v0;
-            // A tet below eps may lose half the slack over the pass, and must not get back above
-            // eps within the bound either: above eps, the exact rule would hold it there.
-            b.tet_slack[t] = if volume >= eps {
-                volume - eps
-            } else if volume.is_finite() {
-                (0.5 * CLAMP_SLACK * v0).min(eps - volume)
-            } else {
-                // A broken preview: no bound is safe; every region holding it walks.
-                f32::NEG_INFINITY
+        // Four tets at a time (see `lanes`), the tail padded with collapsed tets.
+        let (tets, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
+        for start in (0..tets.len()).step_by(LANES) {
+            let n = LANES.min(tets.len() - start);
+            let corner = |k: usize| {
+                Vec3x4::from_vecs(std::array::from_fn(|l| {
+                    if l < n {
+                        self.previews[tets[start + l][k] as usize]
+                    } else {
+                        Vec3::ZERO
+                    }
+                }))
             };
-            b.tet_grad[t] = g.iter().map(|g| g.length()).sum();
-            b.tet_reach[t] = (xp[0] - xp[3])
+            let xd = corner(3);
+            let e = [corner(0) - xd, corner(1) - xd, corner(2) - xd];
+            let sixth = f32x4::splat(SIXTH);
+            let ga = e[1].cross(e[2]).scale(sixth);
+            let gb = e[2].cross(e[0]).scale(sixth);
+            let gc = e[0].cross(e[1]).scale(sixth);
+            let gd = -(ga + gb + gc);
+            let volume = e[0].dot(ga).to_array();
+            let grad = (ga.length_squared().sqrt()
+                + gb.length_squared().sqrt()
+                + gc.length_squared().sqrt()
+                + gd.length_squared().sqrt())
+            .to_array();
+            let reach = e[0]
                 .length_squared()
-                .max((xp[1] - xp[3]).length_squared())
-                .max((xp[2] - xp[3]).length_squared())
-                .sqrt();
+                .max(e[1].length_squared())
+                .max(e[2].length_squared())
+                .sqrt()
+                .to_array();
+            for l in 0..n {
+                let t = start + l;
+                let (volume, v0) = (volume[l], rest_volumes[t]);
+                let eps = CLAMP_FRACTION * v0;
+                // A tet below eps may lose half the slack over the pass, and must not get back
+                // above eps within the bound either: above eps, the exact rule would hold it
+                // there.
+                b.tet_slack[t] = if volume >= eps {
+                    volume - eps
+                } else if volume.is_finite() {
+                    (0.5 * CLAMP_SLACK * v0).min(eps - volume)
+                } else {
+                    // A broken preview: no bound is safe; every region holding it walks.
+                    f32::NEG_INFINITY
+                };
+                b.tet_grad[t] = grad[l];
+                b.tet_reach[t] = reach[l];
+            }
         }
         // A region is a union of one-rings: a ring's tets and border tets are the one-rings of
         // its ring vertices, a tet and its neighbours the one-rings of its four vertices. So the
@@ -755,6 +788,7 @@ mod tests {
     use glam::{UVec3, Vec3};
 
     use super::*;
+    use crate::core::geometry::volume_gradients;
     use crate::core::grid::box_grid;
     use crate::core::material::SoftBodyMaterial;
 
