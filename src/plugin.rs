@@ -12,7 +12,7 @@ use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
     SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
-use crate::core::{ColliderInstance, RigidSphereState, SoftBodyState, TetMesh};
+use crate::core::{ColliderInstance, Parallel, RigidSphereState, Serial, SoftBodyState, TetMesh};
 
 /// The stages of a step, run in this order in the plugin's schedule (see `core::body` for what
 /// each does and why in this order).
@@ -311,6 +311,43 @@ fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState
     }
 }
 
+/// Runs the independent jobs of a volume pass (its slabs, see `core::parallel`) on Bevy's
+/// compute task pool.
+struct ComputePool;
+
+impl Parallel for ComputePool {
+    fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync)) {
+        match bevy::tasks::ComputeTaskPool::try_get() {
+            Some(pool) if jobs > 1 && pool.thread_num() > 1 => {
+                pool.scope(|scope| {
+                    for i in 0..jobs {
+                        scope.spawn(async move { job(i) });
+                    }
+                });
+            }
+            _ => Serial.run(jobs, job),
+        }
+    }
+
+    fn threads(&self) -> usize {
+        // The thread calling `scope` (a pool thread, when a system runs on one) works too;
+        // asking for more jobs than the pool has threads would only make them take turns.
+        bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num())
+    }
+}
+
+/// How the volume passes of each body use the threads: with fewer bodies than threads, each
+/// body's slabs run in parallel too; with more, the bodies alone keep the threads busy. The
+/// result is the same either way (see `core::parallel`).
+fn pass_parallelism(bodies: &Query<(&mut SoftBody, &mut SoftBodyStats)>) -> &'static dyn Parallel {
+    let threads = bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num());
+    if bodies.iter().count() < threads {
+        &ComputePool
+    } else {
+        &Serial
+    }
+}
+
 /// Runs `stage` on every body, in parallel on the compute task pool, timing each body.
 fn par_bodies(
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
@@ -445,9 +482,10 @@ fn one_ring(
         return;
     }
     let start = Instant::now();
+    let parallel = pass_parallelism(&bodies);
     par_with_spheres(&mut bodies, &mut solver, |s, spheres, colliders| {
         let contacts = s.xpbd_pass(h, spheres, colliders);
-        s.one_ring_pass(h, spheres);
+        s.one_ring_pass_on(h, spheres, parallel);
         contacts
     });
     clock.current += start.elapsed();
@@ -464,8 +502,9 @@ fn per_tet(
         return;
     }
     let start = Instant::now();
+    let parallel = pass_parallelism(&bodies);
     par_with_spheres(&mut bodies, &mut solver, |s, spheres, _| {
-        s.per_tet_pass(h, spheres);
+        s.per_tet_pass_on(h, spheres, parallel);
         0
     });
     clock.current += start.elapsed();

@@ -20,7 +20,7 @@ use glam::Vec3;
 
 use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients};
-use super::impulses::RingWork;
+use super::impulses::{ClampMotion, PassWorker};
 use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
 use super::tet_mesh::TetMesh;
 
@@ -108,8 +108,12 @@ pub struct SoftBodyState {
     pub(crate) contact_sphere: Vec<u32>,
     /// The particles with a non-zero entry in `contact_normals`, to clear them cheaply.
     pub(crate) touching: Vec<u32>,
-    /// Working arrays of the ring impulse being computed, sized for the largest one-ring.
-    pub(crate) ring_work: RingWork,
+    /// What the clamp bounds track per particle while a volume pass runs.
+    pub(crate) clamp_motion: ClampMotion,
+    /// One per slab of the mesh: what each job of a volume pass owns.
+    pub(crate) pass_workers: Vec<PassWorker>,
+    /// One per slab: whether its job in the running pass is done.
+    pub(crate) slab_done: super::parallel::SlabFlags,
     pub(crate) counters: StepCounters,
     /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
     pub(crate) gravity: Vec3,
@@ -146,7 +150,9 @@ impl SoftBodyState {
             contact_kept: vec![0.0; n],
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::with_capacity(n),
-            ring_work: RingWork::for_mesh(&mesh),
+            clamp_motion: ClampMotion::default(),
+            pass_workers: vec![PassWorker::for_mesh(&mesh); mesh.slabs().count()],
+            slab_done: super::parallel::SlabFlags::new(mesh.slabs().count()),
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
             sphere_positions: Vec::new(),
@@ -283,21 +289,6 @@ impl SoftBodyState {
         self.touching.clear();
     }
 
-    /// `d` with its push into what particle `i` touches reduced to the part the particle keeps:
-    /// a volume impulse cannot move a particle into the ground at all, and moves a particle
-    /// pressed against a heavy sphere only as far as the pair moves together. The cubic is then
-    /// solved for the motion the particle can make, so the last contact pass does not undo it.
-    #[inline]
-    pub(crate) fn constrain_direction(&self, i: usize, d: Vec3) -> Vec3 {
-        let n = self.contact_normals[i];
-        let into = d.dot(n);
-        if into < 0.0 {
-            d - n * (into * (1.0 - self.contact_kept[i]))
-        } else {
-            d
-        }
-    }
-
     /// Records that particle `i` touches a surface with outward unit `normal`, keeping the share
     /// `kept` of pushes into it; `sphere` is the sphere's index, if it is one.
     #[inline]
@@ -314,34 +305,6 @@ impl SoftBodyState {
         self.contact_normals[i] = normal;
         self.contact_kept[i] = kept;
         self.contact_sphere[i] = sphere.map_or(u32::MAX, |k| k as u32);
-    }
-
-    /// Adds `dv` to particle `i`'s velocity; if `i` is pressed against a sphere and `dv` pushes
-    /// into it, the sphere moves along with the particle (the push was already reduced to the
-    /// pair's share by `constrain_direction`), so momentum is conserved.
-    #[inline(always)]
-    pub(crate) fn apply_velocity_change(
-        &mut self,
-        i: usize,
-        dv: Vec3,
-        h: f32,
-        spheres: &mut [RigidSphereState],
-    ) {
-        self.velocities[i] += dv;
-        self.previews[i] += h * dv;
-        if self.clamp_bounds.active {
-            self.clamp_bounds.note_move(i, self.previews[i]);
-        }
-        let k = self.contact_sphere[i];
-        if k != u32::MAX
-            && let Some(sphere) = spheres.get_mut(k as usize)
-        {
-            let n = self.contact_normals[i];
-            let into = dv.dot(n);
-            if into < 0.0 {
-                sphere.velocity += n * into;
-            }
-        }
     }
 
     /// Stage 1: external, spring and (baseline) volume forces change the velocities.
@@ -483,6 +446,7 @@ impl SoftBodyState {
 
     /// Previewed position of particle `i` (valid after `refresh_previews`, during the volume
     /// passes): where it ends the step with its current velocity.
+    #[cfg(test)]
     #[inline]
     pub(crate) fn preview(&self, i: u32) -> Vec3 {
         self.previews[i as usize]
@@ -571,6 +535,19 @@ impl SoftBodyState {
         spheres: &mut [RigidSphereState],
         colliders: &[super::contacts::ColliderInstance],
     ) {
+        self.step_with_contacts_on(h, gravity, spheres, colliders, &super::parallel::Serial);
+    }
+
+    /// [`SoftBodyState::step_with_contacts`] with the volume passes' slabs run by `parallel`:
+    /// the same result bit for bit on any number of threads.
+    pub fn step_with_contacts_on(
+        &mut self,
+        h: f32,
+        gravity: Vec3,
+        spheres: &mut [RigidSphereState],
+        colliders: &[super::contacts::ColliderInstance],
+        parallel: &dyn super::parallel::Parallel,
+    ) {
         // Spheres against the colliders, then the particles against both (the ground last).
         let contact_pass = |body: &mut Self, spheres: &mut [RigidSphereState]| {
             for sphere in spheres.iter_mut() {
@@ -589,8 +566,8 @@ impl SoftBodyState {
         }
         contact_pass(self, spheres);
         let _ = self.xpbd_pass(h, spheres, colliders);
-        self.one_ring_pass(h, spheres);
-        self.per_tet_pass(h, spheres);
+        self.one_ring_pass_on(h, spheres, parallel);
+        self.per_tet_pass_on(h, spheres, parallel);
         self.apply_plasticity(h);
         contact_pass(self, spheres);
         self.integrate_positions(h);

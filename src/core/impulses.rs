@@ -28,16 +28,19 @@
 //!
 //! [`StepCounters`]: super::body::StepCounters
 
+use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+
 use glam::Vec3;
 use wide::{CmpGt, f32x4};
 
-use super::body::SoftBodyState;
+use super::body::{SoftBodyState, StepCounters};
 use super::contacts::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_with_edges};
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
+use super::parallel::{Parallel, Serial, SharedSlice};
 use super::roots::{Cubic, first_crossing, monotone_root};
-use super::tet_mesh::TetMesh;
+use super::tet_mesh::{Csr, TetMesh};
 
 /// What one impulse did.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -91,25 +94,55 @@ pub(crate) struct ClampBounds {
     region_slack: Vec<f32>,
     region_grad: Vec<f32>,
     region_reach: Vec<f32>,
-    /// The largest drift any particle has had in this pass (drifts can shrink again; this
-    /// cannot, so it bounds every particle's drift now).
-    max_moved: f32,
     /// Previews at the start of the pass: a particle's drift is its distance from here.
     start: Vec<Vec3>,
-    /// Each particle's drift so far in the pass, kept up to date by `note_move`.
+}
+
+/// What the clamp bounds track while a pass runs, per particle.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ClampMotion {
+    /// Each particle's drift so far in the pass: the distance of its preview from
+    /// [`ClampBounds`]' start.
     drift: Vec<f32>,
     /// During a clamp walk, the length of each particle's direction (zero for particles the
     /// impulse does not move), so the walk reads one number per vertex.
     move_len: Vec<f32>,
 }
 
-impl ClampBounds {
-    /// Records that particle `i`'s preview is now at `preview`.
-    #[inline]
-    pub(crate) fn note_move(&mut self, i: usize, preview: Vec3) {
-        let drift = (preview - self.start[i]).length();
-        self.drift[i] = drift;
-        self.max_moved = larger(self.max_moved, drift);
+/// Waits until `flag` is set by another thread (spinning first: slabs take well under a
+/// millisecond, less than a thread takes to be woken).
+fn wait_for(flag: &AtomicBool) {
+    let mut spins = 0u32;
+    while !flag.load(Ordering::Acquire) {
+        if spins < 1 << 14 {
+            std::hint::spin_loop();
+            spins += 1;
+        } else {
+            std::thread::yield_now();
+        }
+    }
+}
+
+/// What one slab's job owns during a pass (see [`super::parallel`]): its working arrays, its
+/// counters, and the velocity changes it gives the spheres, added to them after the pass in
+/// slab order so that the sum does not depend on which job finished first.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct PassWorker {
+    ring_work: RingWork,
+    counters: StepCounters,
+    /// The largest drift of any particle this job could have seen moved: the largest of all
+    /// jobs at the start of its phase, then its own moves (drifts can shrink again; this cannot).
+    max_moved: f32,
+    sphere_dv: Vec<Vec3>,
+}
+
+impl PassWorker {
+    /// A worker for passes over `mesh`.
+    pub(crate) fn for_mesh(mesh: &TetMesh) -> PassWorker {
+        PassWorker {
+            ring_work: RingWork::for_mesh(mesh),
+            ..Default::default()
+        }
     }
 }
 
@@ -172,6 +205,28 @@ impl RingWork {
     }
 }
 
+/// Corner `k` of four ring tets, from the ring's gathered `values`.
+#[inline(always)]
+fn gather(values: &[Vec3], corners: &[[u16; 4]; LANES], k: usize) -> Vec3x4 {
+    Vec3x4::from_vecs([
+        values[corners[0][k] as usize],
+        values[corners[1][k] as usize],
+        values[corners[2][k] as usize],
+        values[corners[3][k] as usize],
+    ])
+}
+
+/// [`gather`] for numbers.
+#[inline(always)]
+fn gather_f32(values: &[f32], corners: &[[u16; 4]; LANES], k: usize) -> [f32; LANES] {
+    [
+        values[corners[0][k] as usize],
+        values[corners[1][k] as usize],
+        values[corners[2][k] as usize],
+        values[corners[3][k] as usize],
+    ]
+}
+
 /// What a ring impulse knows of four tets of its ring at the current previews.
 #[derive(Clone, Copy, Debug, Default)]
 struct RingLanes {
@@ -218,6 +273,17 @@ impl SoftBodyState {
     /// `spheres` are the rigid spheres of the last contact pass, in the same order: particles
     /// pressed against one move it along.
     pub fn one_ring_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
+        self.one_ring_pass_on(h, spheres, &Serial);
+    }
+
+    /// [`SoftBodyState::one_ring_pass`] with the mesh's slabs run by `parallel`: the same
+    /// result bit for bit on any number of threads (see [`super::parallel`]).
+    pub fn one_ring_pass_on(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
         let VolumeMethod::Impulses(settings) = self.material.method else {
             return;
         };
@@ -228,18 +294,21 @@ impl SoftBodyState {
         if settings.neighbour_clamp {
             self.prepare_clamp_bounds(ClampRegions::Rings);
         }
-        // One handle on the mesh for the whole pass, not one per impulse.
         let mesh = self.mesh.clone();
-        for p in 0..mesh.vertex_count() {
-            self.ring_impulse(
-                &mesh,
-                p,
-                h,
-                settings.tolerance,
-                settings.neighbour_clamp,
-                spheres,
-            );
-        }
+        self.run_slabs(
+            h,
+            spheres,
+            parallel,
+            &mesh.slabs().vertices,
+            &|view, worker, p| {
+                view.ring_impulse(
+                    worker,
+                    p as usize,
+                    settings.tolerance,
+                    settings.neighbour_clamp,
+                );
+            },
+        );
         self.clamp_bounds.active = false;
     }
 
@@ -247,6 +316,17 @@ impl SoftBodyState {
     /// end of section 5). Does nothing for the baseline or when the per-tet switch is off.
     /// `spheres` as for [`SoftBodyState::one_ring_pass`].
     pub fn per_tet_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
+        self.per_tet_pass_on(h, spheres, &Serial);
+    }
+
+    /// [`SoftBodyState::per_tet_pass`] with the mesh's slabs run by `parallel`, as
+    /// [`SoftBodyState::one_ring_pass_on`].
+    pub fn per_tet_pass_on(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
         let VolumeMethod::Impulses(settings) = self.material.method else {
             return;
         };
@@ -258,277 +338,173 @@ impl SoftBodyState {
             self.prepare_clamp_bounds(ClampRegions::Tets);
         }
         let mesh = self.mesh.clone();
-        for t in 0..mesh.tet_count() {
-            self.tet_impulse(&mesh, t, h, &settings, spheres);
-        }
+        self.run_slabs(
+            h,
+            spheres,
+            parallel,
+            &mesh.slabs().tets,
+            &|view, worker, t| {
+                view.tet_impulse(worker, t as usize, &settings);
+            },
+        );
         self.clamp_bounds.active = false;
     }
 
-    /// The one-ring impulse of vertex `p`: every particle of the ring moves by `s * D_i`, where
-    /// `D_i` sums the directions of the ring's tets that contain it, and `s` is the smallest
-    /// positive root of `sum_t V_t(s) = sum_t V0_t`. Needs `refresh_previews` first.
+    /// Runs `impulse` on every item of every task of the mesh's [`Slabs`] (`items` picks the
+    /// vertices or the tets), each task's items in order, with the result of running the tasks
+    /// one after another (see [`super::parallel`]): the threads of `parallel` take tasks in
+    /// order as they come free, each waiting for the earlier tasks it shares particles with. A
+    /// thread only ever waits for tasks a running thread has already taken, so any number of
+    /// threads, one included, finishes. Then adds up the tasks' counters and sphere velocity
+    /// changes in task order.
     ///
-    /// The ring's particles are gathered into [`RingWork`] first and its tets are computed four
-    /// at a time in SIMD lanes ([`Vec3x4`]), with the scalar code's operations in the scalar
-    /// code's order, so the result is bit for bit the same as one tet at a time.
+    /// [`Slabs`]: super::tet_mesh::Slabs
+    fn run_slabs(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+        slabs: &Csr,
+        impulse: &(dyn Fn(&PassView, &mut PassWorker, u32) + Sync),
+    ) {
+        for worker in &mut self.pass_workers {
+            worker.counters = StepCounters::default();
+            worker.max_moved = 0.0;
+            worker.sphere_dv.clear();
+            worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        }
+        for done in self.slab_done.iter() {
+            done.store(false, Ordering::Relaxed);
+        }
+        {
+            let view = PassView {
+                mesh: &self.mesh,
+                h,
+                inv_masses: &self.inv_masses,
+                contact_normals: &self.contact_normals,
+                contact_kept: &self.contact_kept,
+                contact_sphere: &self.contact_sphere,
+                any_touching: !self.touching.is_empty(),
+                bounds: &self.clamp_bounds,
+                velocities: SharedSlice::new(&mut self.velocities),
+                previews: SharedSlice::new(&mut self.previews),
+                scratch: SharedSlice::new(&mut self.scratch),
+                drift: SharedSlice::new(&mut self.clamp_motion.drift),
+                move_len: SharedSlice::new(&mut self.clamp_motion.move_len),
+            };
+            let workers = SharedSlice::new(&mut self.pass_workers);
+            let done = &self.slab_done;
+            let waits_for = &self.mesh.slabs().waits_for;
+            let count = slabs.len();
+            let next = AtomicUsize::new(0);
+            let run = |_thread: usize| {
+                loop {
+                    let task = next.fetch_add(1, Ordering::Relaxed);
+                    if task >= count {
+                        return;
+                    }
+                    // The particles this task reads were last moved by the tasks it waits for:
+                    // their largest drift bounds those particles' drift.
+                    let mut start_drift = 0.0f32;
+                    for &earlier in waits_for.row(task) {
+                        let earlier = earlier as usize;
+                        wait_for(&done[earlier]);
+                        // Safety: that task is done; nothing writes its worker now.
+                        let moved = unsafe { workers.get_mut(earlier) }.max_moved;
+                        start_drift = larger(start_drift, moved);
+                    }
+                    // Safety: each task is taken by one thread only.
+                    let worker = unsafe { workers.get_mut(task) };
+                    worker.max_moved = start_drift;
+                    for &item in slabs.row(task) {
+                        impulse(&view, worker, item);
+                    }
+                    done[task].store(true, Ordering::Release);
+                }
+            };
+            parallel.run(parallel.threads().clamp(1, count.max(1)), &run);
+        }
+        let c = &mut self.counters;
+        for worker in &self.pass_workers {
+            let w = &worker.counters;
+            c.rings_corrected += w.rings_corrected;
+            c.rings_without_root += w.rings_without_root;
+            c.rings_clamped += w.rings_clamped;
+            c.tets_without_root += w.tets_without_root;
+            c.tets_clamped += w.tets_clamped;
+            c.clamps_skipped += w.clamps_skipped;
+            for (sphere, dv) in spheres.iter_mut().zip(&worker.sphere_dv) {
+                sphere.velocity += *dv;
+            }
+        }
+    }
+
+    /// The one-ring impulse of vertex `p` alone, outside a pass (no clamp bounds). Needs
+    /// `refresh_previews` first.
+    #[cfg(test)]
     pub(crate) fn ring_impulse(
         &mut self,
-        mesh: &TetMesh,
+        _mesh: &TetMesh,
         p: usize,
         h: f32,
         tolerance: f32,
         clamp: bool,
         spheres: &mut [RigidSphereState],
     ) -> ImpulseOutcome {
-        let ring = mesh.one_ring(p);
-        let corners = mesh.ring_corners(p);
-        let vertices = mesh.ring_vertices(p);
-        let rest_volumes = mesh.rest_volumes();
-        let mut work = std::mem::take(&mut self.ring_work);
-        for (k, &i) in vertices.iter().enumerate() {
-            work.previews[k] = self.previews[i as usize];
-        }
-        // The tets' volumes, errors, edges and gradients at the previews, four at a time.
-        let groups = ring.len().div_ceil(LANES);
-        let mut rest = 0.0f64;
-        let mut outside_tolerance = f32x4::ZERO;
-        for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
-            let mut v0 = [0.0f32; LANES];
-            let mut tet_corners = [[0u16; 4]; LANES];
-            for l in 0..LANES {
-                let j = LANES * group + l;
-                if j < ring.len() {
-                    v0[l] = rest_volumes[ring[j] as usize];
-                    rest += v0[l] as f64;
-                    tet_corners[l] = corners[j];
-                }
-            }
-            // Unused lanes hold a tet collapsed onto the centre: zero edges, volume and error.
-            let x = |k: usize| Vec3x4::from_vecs(tet_corners.map(|c| work.previews[c[k] as usize]));
-            let xd = x(3);
-            let edges = [x(0) - xd, x(1) - xd, x(2) - xd];
-            let sixth = f32x4::splat(SIXTH);
-            let gradients = [
-                edges[1].cross(edges[2]).scale(sixth),
-                edges[2].cross(edges[0]).scale(sixth),
-                edges[0].cross(edges[1]).scale(sixth),
-            ];
-            // The volume from the gradient already at hand: `ga = eb x ec / 6`.
-            let volume = edges[0].dot(gradients[0]);
-            let v0 = f32x4::new(v0);
-            let error = volume - v0;
-            outside_tolerance |= error.abs().cmp_gt(f32x4::splat(tolerance) * v0);
-            *lanes = RingLanes {
-                edges,
-                gradients,
-                volume,
-                error,
-            };
-        }
-        // Most rings of a body near rest are within tolerance: they stop here, before any
-        // direction is written.
-        if !outside_tolerance.any() {
-            self.ring_work = work;
-            return ImpulseOutcome::Skipped;
-        }
-        for (k, &i) in vertices.iter().enumerate() {
-            work.inv_masses[k] = self.inv_masses[i as usize];
-            work.directions[k] = Vec3::ZERO;
-        }
-        // Each tet's directions `d_i = -w_i C_t grad_i`, summed per particle in ring order; the
-        // stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
-        let mut stiffest = 0.0f32;
-        let mut any = false;
-        for (group, lanes) in work.tets[..groups].iter().enumerate() {
-            let tet_corners: [[u16; 4]; LANES] =
-                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
-            let [ga, gb, gc] = lanes.gradients;
-            let g = [ga, gb, gc, -(ga + gb + gc)];
-            let mut stiffness = f32x4::ZERO;
-            let mut d = [Vec3x4::ZERO; 4];
-            for k in 0..4 {
-                let w = f32x4::new(tet_corners.map(|c| work.inv_masses[c[k] as usize]));
-                stiffness = stiffness + w * g[k].length_squared();
-                d[k] = g[k].scale(-w * lanes.error);
-            }
-            let (errors, stiffness) = (lanes.error.to_array(), stiffness.to_array());
-            let d = d.map(Vec3x4::to_vecs);
-            for l in 0..LANES {
-                if errors[l] == 0.0 {
-                    continue;
-                }
-                stiffest = stiffest.max(stiffness[l]);
-                for k in 0..4 {
-                    work.directions[tet_corners[l][k] as usize] += d[k][l];
-                    any |= d[k][l] != Vec3::ZERO;
-                }
-            }
-        }
-        let tet_step = 1.0 / stiffest as f64;
-        if !any {
-            self.ring_work = work;
-            return ImpulseOutcome::Skipped;
-        }
-        if !self.touching.is_empty() {
-            for (k, &i) in vertices.iter().enumerate() {
-                work.directions[k] = self.constrain_direction(i as usize, work.directions[k]);
-            }
-        }
-        // The ring's volume polynomial, summed tet by tet in ring order.
-        let mut poly: Cubic = [-rest, 0.0, 0.0, 0.0];
-        let sixth = 1.0 / 6.0;
-        for (group, lanes) in work.tets[..groups].iter().enumerate() {
-            let tet_corners: [[u16; 4]; LANES] =
-                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
-            let dir =
-                |k: usize| Vec3x4::from_vecs(tet_corners.map(|c| work.directions[c[k] as usize]));
-            let dd = dir(3);
-            let (fa, fb, fc) = (dir(0) - dd, dir(1) - dd, dir(2) - dd);
-            let [ga, gb, gc] = lanes.gradients;
-            let [ea, eb, ec] = lanes.edges;
-            let c1 = ga.dot(fa) + gb.dot(fb) + gc.dot(fc);
-            let fbc = fb.cross(fc);
-            let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
-            let c3 = fa.dot(fbc);
-            let (volume, c1, c2, c3) = (
-                lanes.volume.to_array(),
-                c1.to_array(),
-                c2.to_array(),
-                c3.to_array(),
-            );
-            for l in 0..LANES.min(ring.len() - LANES * group) {
-                poly[0] += volume[l] as f64;
-                poly[1] += c1[l] as f64;
-                poly[2] += c2[l] as f64 * sixth;
-                poly[3] += c3[l] as f64 * sixth;
-            }
-        }
-        let Some(root) = monotone_root(&poly) else {
-            self.counters.rings_without_root += 1;
-            self.ring_work = work;
-            return ImpulseOutcome::NoRoot;
-        };
-        let limited = root.min(RING_STEP_LIMIT * tet_step);
-        let mut step = limited;
-        if clamp {
-            let largest = work.directions[..vertices.len()]
-                .iter()
-                .map(|d| d.length_squared())
-                .fold(0.0f32, larger);
-            if let Some(drift) = self.clamp_drift(p, vertices, step as f32 * largest.sqrt()) {
-                // The walk reads directions by particle: lend them to `scratch` for it.
-                for (k, &i) in vertices.iter().enumerate() {
-                    self.scratch[i as usize] = work.directions[k];
-                }
-                self.set_move_lengths(vertices, true);
-                step =
-                    self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step, drift);
-                self.set_move_lengths(vertices, false);
-                self.clear_directions(vertices);
-            } else {
-                self.counters.clamps_skipped += 1;
-            }
-        }
-        let clamped = step < limited;
-        self.counters.rings_corrected += 1;
-        self.counters.rings_clamped += clamped as u32;
-        let scale = (step / h as f64) as f32;
-        for (k, &i) in vertices.iter().enumerate() {
-            self.apply_velocity_change(i as usize, scale * work.directions[k], h, spheres);
-        }
-        self.ring_work = work;
-        ImpulseOutcome::Applied {
-            step,
-            root,
-            clamped,
-        }
+        let mut worker = PassWorker::for_mesh(&self.mesh);
+        worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        let outcome = self
+            .single_view(h)
+            .ring_impulse(&mut worker, p, tolerance, clamp);
+        self.finish_single(worker, spheres);
+        outcome
     }
 
-    /// The per-tet impulse of tet `t`: its four particles move by `gamma * s * d_i`, `s` being the
-    /// smallest positive root of `V_t(s) = V0_t`. Needs `refresh_previews` first.
+    /// The per-tet impulse of tet `t` alone, outside a pass (no clamp bounds). Needs
+    /// `refresh_previews` first.
+    #[cfg(test)]
     pub(crate) fn tet_impulse(
         &mut self,
-        mesh: &TetMesh,
+        _mesh: &TetMesh,
         t: usize,
         h: f32,
         settings: &ImpulseSettings,
         spheres: &mut [RigidSphereState],
     ) -> ImpulseOutcome {
-        let (gamma, tolerance, clamp) = (
-            settings.gamma as f64,
-            settings.tolerance,
-            settings.neighbour_clamp,
-        );
-        let tet = mesh.tets()[t];
-        let v0 = mesh.rest_volumes()[t];
-        let xp = tet.map(|i| self.preview(i));
-        let (ea, eb, ec) = (xp[0] - xp[3], xp[1] - xp[3], xp[2] - xp[3]);
-        // `signed_volume`, keeping the cross product that is also a's gradient.
-        let ebc = eb.cross(ec);
-        let volume = ea.dot(ebc) * SIXTH;
-        let c = volume - v0;
-        if c == 0.0 || c.abs() <= tolerance * v0 {
-            return ImpulseOutcome::Skipped;
-        }
-        let ga = ebc * SIXTH;
-        let gb = ec.cross(ea) * SIXTH;
-        let gc = ea.cross(eb) * SIXTH;
-        let g = [ga, gb, gc, -(ga + gb + gc)];
-        let d: [Vec3; 4] = std::array::from_fn(|k| {
-            let i = tet[k] as usize;
-            self.constrain_direction(i, -self.inv_masses[i] * c * g[k])
-        });
-        if d.iter().all(|&x| x == Vec3::ZERO) {
-            return ImpulseOutcome::Skipped;
-        }
-        let mut poly = volume_polynomial_with_edges(&[ea, eb, ec], volume, &g, &d);
-        poly[0] -= v0 as f64;
-        let Some(root) = monotone_root(&poly) else {
-            self.counters.tets_without_root += 1;
-            return ImpulseOutcome::NoRoot;
-        };
-        let full = gamma * root;
-        let mut step = full;
-        if clamp {
-            let largest = d.iter().map(|x| x.length_squared()).fold(0.0f32, larger);
-            if let Some(drift) = self.clamp_drift(t, &tet, step as f32 * largest.sqrt()) {
-                for k in 0..4 {
-                    self.scratch[tet[k] as usize] = d[k];
-                }
-                self.set_move_lengths(&tet, true);
-                step = self.neighbour_clamp(
-                    std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
-                    step,
-                    drift,
-                );
-                self.set_move_lengths(&tet, false);
-                for &i in &tet {
-                    self.scratch[i as usize] = Vec3::ZERO;
-                }
-            } else {
-                self.counters.clamps_skipped += 1;
-            }
-        }
-        let clamped = step < full;
-        self.counters.tets_clamped += clamped as u32;
-        let scale = (step / h as f64) as f32;
-        for k in 0..4 {
-            self.apply_velocity_change(tet[k] as usize, scale * d[k], h, spheres);
-        }
-        ImpulseOutcome::Applied {
-            step,
-            root,
-            clamped,
+        let mut worker = PassWorker::for_mesh(&self.mesh);
+        worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        let outcome = self.single_view(h).tet_impulse(&mut worker, t, settings);
+        self.finish_single(worker, spheres);
+        outcome
+    }
+
+    #[cfg(test)]
+    fn finish_single(&mut self, worker: PassWorker, spheres: &mut [RigidSphereState]) {
+        self.counters = worker.counters;
+        for (sphere, dv) in spheres.iter_mut().zip(&worker.sphere_dv) {
+            sphere.velocity += *dv;
         }
     }
 
-    /// Volume polynomial of `tet` when its particles move from their previewed positions along
-    /// the directions held in `scratch` (zero for particles that do not move).
-    #[inline]
-    fn moved_volume(&self, tet: [u32; 4]) -> Cubic {
-        let xp = tet.map(|i| self.preview(i));
-        let d = tet.map(|i| self.scratch[i as usize]);
-        volume_polynomial(&xp, &d)
+    #[cfg(test)]
+    fn single_view(&mut self, h: f32) -> PassView<'_> {
+        self.clamp_motion.drift.resize(self.previews.len(), 0.0);
+        self.clamp_motion.move_len.resize(self.previews.len(), 0.0);
+        PassView {
+            mesh: &self.mesh,
+            h,
+            inv_masses: &self.inv_masses,
+            contact_normals: &self.contact_normals,
+            contact_kept: &self.contact_kept,
+            contact_sphere: &self.contact_sphere,
+            any_touching: !self.touching.is_empty(),
+            bounds: &self.clamp_bounds,
+            velocities: SharedSlice::new(&mut self.velocities),
+            previews: SharedSlice::new(&mut self.previews),
+            scratch: SharedSlice::new(&mut self.scratch),
+            drift: SharedSlice::new(&mut self.clamp_motion.drift),
+            move_len: SharedSlice::new(&mut self.clamp_motion.move_len),
+        }
     }
 
     /// Computes the [`ClampBounds`] of the coming pass from the current previews.
@@ -633,11 +609,341 @@ impl SoftBodyState {
         }
         b.start.clear();
         b.start.extend_from_slice(&self.previews);
-        b.max_moved = 0.0;
-        b.drift.clear();
-        b.drift.resize(self.previews.len(), 0.0);
-        b.move_len.resize(self.previews.len(), 0.0);
+        let motion = &mut self.clamp_motion;
+        motion.drift.clear();
+        motion.drift.resize(self.previews.len(), 0.0);
+        motion.move_len.resize(self.previews.len(), 0.0);
         b.active = true;
+    }
+}
+
+/// What the jobs of a pass share: the body's read-only data, and the arrays they write, each
+/// element by one job at a time (see [`super::parallel`]).
+pub(crate) struct PassView<'a> {
+    mesh: &'a TetMesh,
+    h: f32,
+    inv_masses: &'a [f32],
+    contact_normals: &'a [Vec3],
+    contact_kept: &'a [f32],
+    contact_sphere: &'a [u32],
+    any_touching: bool,
+    bounds: &'a ClampBounds,
+    velocities: SharedSlice<'a, Vec3>,
+    /// Previewed positions `x + h v`, kept up to date with every velocity change.
+    previews: SharedSlice<'a, Vec3>,
+    /// Impulse directions by particle, for the clamp walk (zero outside a walk).
+    scratch: SharedSlice<'a, Vec3>,
+    drift: SharedSlice<'a, f32>,
+    move_len: SharedSlice<'a, f32>,
+}
+
+impl PassView<'_> {
+    #[inline(always)]
+    fn preview(&self, i: u32) -> Vec3 {
+        self.previews.get(i as usize)
+    }
+
+    /// `d` with its push into what particle `i` touches reduced to the part the particle keeps:
+    /// a volume impulse cannot move a particle into the ground at all, and moves a particle
+    /// pressed against a heavy sphere only as far as the pair moves together. The cubic is then
+    /// solved for the motion the particle can make, so the last contact pass does not undo it.
+    #[inline]
+    fn constrain_direction(&self, i: usize, d: Vec3) -> Vec3 {
+        let n = self.contact_normals[i];
+        let into = d.dot(n);
+        if into < 0.0 {
+            d - n * (into * (1.0 - self.contact_kept[i]))
+        } else {
+            d
+        }
+    }
+
+    /// Adds `dv` to particle `i`'s velocity; if `i` is pressed against a sphere and `dv` pushes
+    /// into it, the sphere moves along with the particle (the push was already reduced to the
+    /// pair's share by `constrain_direction`), so momentum is conserved.
+    #[inline(always)]
+    fn apply_velocity_change(&self, worker: &mut PassWorker, i: usize, dv: Vec3) {
+        self.velocities.set(i, self.velocities.get(i) + dv);
+        let preview = self.previews.get(i) + self.h * dv;
+        self.previews.set(i, preview);
+        if self.bounds.active {
+            let drift = (preview - self.bounds.start[i]).length();
+            self.drift.set(i, drift);
+            worker.max_moved = larger(worker.max_moved, drift);
+        }
+        let k = self.contact_sphere[i];
+        if k != u32::MAX
+            && let Some(sphere_dv) = worker.sphere_dv.get_mut(k as usize)
+        {
+            let n = self.contact_normals[i];
+            let into = dv.dot(n);
+            if into < 0.0 {
+                *sphere_dv += n * into;
+            }
+        }
+    }
+
+    /// The one-ring impulse of vertex `p`: every particle of the ring moves by `s * D_i`, where
+    /// `D_i` sums the directions of the ring's tets that contain it, and `s` is the smallest
+    /// positive root of `sum_t V_t(s) = sum_t V0_t`. Needs `refresh_previews` first.
+    ///
+    /// The ring's particles are gathered into [`RingWork`] first and its tets are computed four
+    /// at a time in SIMD lanes ([`Vec3x4`]), with the scalar code's operations in the scalar
+    /// code's order, so the result is bit for bit the same as one tet at a time.
+    fn ring_impulse(
+        &self,
+        worker: &mut PassWorker,
+        p: usize,
+        tolerance: f32,
+        clamp: bool,
+    ) -> ImpulseOutcome {
+        let mesh = self.mesh;
+        let ring = mesh.one_ring(p);
+        let corners = mesh.ring_corners(p);
+        let vertices = mesh.ring_vertices(p);
+        let rest_volumes = mesh.rest_volumes();
+        let work = &mut worker.ring_work;
+        for (k, &i) in vertices.iter().enumerate() {
+            work.previews[k] = self.previews.get(i as usize);
+        }
+        // The tets' volumes, errors, edges and gradients at the previews, four at a time.
+        let groups = ring.len().div_ceil(LANES);
+        let mut rest = 0.0f64;
+        let mut outside_tolerance = f32x4::ZERO;
+        for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
+            let mut v0 = [0.0f32; LANES];
+            let mut tet_corners = [[0u16; 4]; LANES];
+            for l in 0..LANES {
+                let j = LANES * group + l;
+                if j < ring.len() {
+                    v0[l] = rest_volumes[ring[j] as usize];
+                    rest += v0[l] as f64;
+                    tet_corners[l] = corners[j];
+                }
+            }
+            // Unused lanes hold a tet collapsed onto the centre: zero edges, volume and error.
+            let x = |k: usize| gather(&work.previews, &tet_corners, k);
+            let xd = x(3);
+            let edges = [x(0) - xd, x(1) - xd, x(2) - xd];
+            let sixth = f32x4::splat(SIXTH);
+            let gradients = [
+                edges[1].cross(edges[2]).scale(sixth),
+                edges[2].cross(edges[0]).scale(sixth),
+                edges[0].cross(edges[1]).scale(sixth),
+            ];
+            // The volume from the gradient already at hand: `ga = eb x ec / 6`.
+            let volume = edges[0].dot(gradients[0]);
+            let v0 = f32x4::new(v0);
+            let error = volume - v0;
+            outside_tolerance |= error.abs().cmp_gt(f32x4::splat(tolerance) * v0);
+            *lanes = RingLanes {
+                edges,
+                gradients,
+                volume,
+                error,
+            };
+        }
+        // Most rings of a body near rest are within tolerance: they stop here, before any
+        // direction is written.
+        if !outside_tolerance.any() {
+            return ImpulseOutcome::Skipped;
+        }
+        for (k, &i) in vertices.iter().enumerate() {
+            work.inv_masses[k] = self.inv_masses[i as usize];
+            work.directions[k] = Vec3::ZERO;
+        }
+        // Each tet's directions `d_i = -w_i C_t grad_i`, summed per particle in ring order; the
+        // stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
+        let mut stiffest = 0.0f32;
+        let mut any = false;
+        for (group, lanes) in work.tets[..groups].iter().enumerate() {
+            let tet_corners: [[u16; 4]; LANES] =
+                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
+            let [ga, gb, gc] = lanes.gradients;
+            let g = [ga, gb, gc, -(ga + gb + gc)];
+            let mut stiffness = f32x4::ZERO;
+            let mut d = [Vec3x4::ZERO; 4];
+            for k in 0..4 {
+                let w = f32x4::new(gather_f32(&work.inv_masses, &tet_corners, k));
+                stiffness = stiffness + w * g[k].length_squared();
+                d[k] = g[k].scale(-w * lanes.error);
+            }
+            let (errors, stiffness) = (lanes.error.to_array(), stiffness.to_array());
+            let d = d.map(Vec3x4::to_vecs);
+            for l in 0..LANES {
+                if errors[l] == 0.0 {
+                    continue;
+                }
+                stiffest = stiffest.max(stiffness[l]);
+                for k in 0..4 {
+                    work.directions[tet_corners[l][k] as usize] += d[k][l];
+                    any |= d[k][l] != Vec3::ZERO;
+                }
+            }
+        }
+        let tet_step = 1.0 / stiffest as f64;
+        if !any {
+            return ImpulseOutcome::Skipped;
+        }
+        if self.any_touching {
+            for (k, &i) in vertices.iter().enumerate() {
+                work.directions[k] = self.constrain_direction(i as usize, work.directions[k]);
+            }
+        }
+        // The ring's volume polynomial, summed tet by tet in ring order.
+        let mut poly: Cubic = [-rest, 0.0, 0.0, 0.0];
+        let sixth = 1.0 / 6.0;
+        for (group, lanes) in work.tets[..groups].iter().enumerate() {
+            let tet_corners: [[u16; 4]; LANES] =
+                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
+            let dir = |k: usize| gather(&work.directions, &tet_corners, k);
+            let dd = dir(3);
+            let (fa, fb, fc) = (dir(0) - dd, dir(1) - dd, dir(2) - dd);
+            let [ga, gb, gc] = lanes.gradients;
+            let [ea, eb, ec] = lanes.edges;
+            let c1 = ga.dot(fa) + gb.dot(fb) + gc.dot(fc);
+            let fbc = fb.cross(fc);
+            let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
+            let c3 = fa.dot(fbc);
+            let (volume, c1, c2, c3) = (
+                lanes.volume.to_array(),
+                c1.to_array(),
+                c2.to_array(),
+                c3.to_array(),
+            );
+            for l in 0..LANES.min(ring.len() - LANES * group) {
+                poly[0] += volume[l] as f64;
+                poly[1] += c1[l] as f64;
+                poly[2] += c2[l] as f64 * sixth;
+                poly[3] += c3[l] as f64 * sixth;
+            }
+        }
+        let Some(root) = monotone_root(&poly) else {
+            worker.counters.rings_without_root += 1;
+            return ImpulseOutcome::NoRoot;
+        };
+        let limited = root.min(RING_STEP_LIMIT * tet_step);
+        let mut step = limited;
+        if clamp {
+            let largest = work.directions[..vertices.len()]
+                .iter()
+                .map(|d| d.length_squared())
+                .fold(0.0f32, larger);
+            if let Some(drift) =
+                self.clamp_drift(worker.max_moved, p, vertices, step as f32 * largest.sqrt())
+            {
+                // The walk reads directions by particle: lend them to `scratch` for it.
+                for (k, &i) in vertices.iter().enumerate() {
+                    self.scratch.set(i as usize, worker.ring_work.directions[k]);
+                }
+                self.set_move_lengths(vertices, true);
+                step =
+                    self.neighbour_clamp(ring.iter().chain(mesh.ring_border_tets(p)), step, drift);
+                self.set_move_lengths(vertices, false);
+                self.clear_directions(vertices);
+            } else {
+                worker.counters.clamps_skipped += 1;
+            }
+        }
+        let clamped = step < limited;
+        worker.counters.rings_corrected += 1;
+        worker.counters.rings_clamped += clamped as u32;
+        let scale = (step / self.h as f64) as f32;
+        for (k, &i) in vertices.iter().enumerate() {
+            let dv = scale * worker.ring_work.directions[k];
+            self.apply_velocity_change(worker, i as usize, dv);
+        }
+        ImpulseOutcome::Applied {
+            step,
+            root,
+            clamped,
+        }
+    }
+
+    /// The per-tet impulse of tet `t`: its four particles move by `gamma * s * d_i`, `s` being the
+    /// smallest positive root of `V_t(s) = V0_t`. Needs `refresh_previews` first.
+    fn tet_impulse(
+        &self,
+        worker: &mut PassWorker,
+        t: usize,
+        settings: &ImpulseSettings,
+    ) -> ImpulseOutcome {
+        let mesh = self.mesh;
+        let (gamma, tolerance, clamp) = (
+            settings.gamma as f64,
+            settings.tolerance,
+            settings.neighbour_clamp,
+        );
+        let tet = mesh.tets()[t];
+        let v0 = mesh.rest_volumes()[t];
+        let xp = tet.map(|i| self.preview(i));
+        let (ea, eb, ec) = (xp[0] - xp[3], xp[1] - xp[3], xp[2] - xp[3]);
+        // `signed_volume`, keeping the cross product that is also a's gradient.
+        let ebc = eb.cross(ec);
+        let volume = ea.dot(ebc) * SIXTH;
+        let c = volume - v0;
+        if c == 0.0 || c.abs() <= tolerance * v0 {
+            return ImpulseOutcome::Skipped;
+        }
+        let ga = ebc * SIXTH;
+        let gb = ec.cross(ea) * SIXTH;
+        let gc = ea.cross(eb) * SIXTH;
+        let g = [ga, gb, gc, -(ga + gb + gc)];
+        let d: [Vec3; 4] = std::array::from_fn(|k| {
+            let i = tet[k] as usize;
+            self.constrain_direction(i, -self.inv_masses[i] * c * g[k])
+        });
+        if d.iter().all(|&x| x == Vec3::ZERO) {
+            return ImpulseOutcome::Skipped;
+        }
+        let mut poly = volume_polynomial_with_edges(&[ea, eb, ec], volume, &g, &d);
+        poly[0] -= v0 as f64;
+        let Some(root) = monotone_root(&poly) else {
+            worker.counters.tets_without_root += 1;
+            return ImpulseOutcome::NoRoot;
+        };
+        let full = gamma * root;
+        let mut step = full;
+        if clamp {
+            let largest = d.iter().map(|x| x.length_squared()).fold(0.0f32, larger);
+            if let Some(drift) =
+                self.clamp_drift(worker.max_moved, t, &tet, step as f32 * largest.sqrt())
+            {
+                for k in 0..4 {
+                    self.scratch.set(tet[k] as usize, d[k]);
+                }
+                self.set_move_lengths(&tet, true);
+                step = self.neighbour_clamp(
+                    std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
+                    step,
+                    drift,
+                );
+                self.set_move_lengths(&tet, false);
+                self.clear_directions(&tet);
+            } else {
+                worker.counters.clamps_skipped += 1;
+            }
+        }
+        let clamped = step < full;
+        worker.counters.tets_clamped += clamped as u32;
+        let scale = (step / self.h as f64) as f32;
+        for k in 0..4 {
+            self.apply_velocity_change(worker, tet[k] as usize, scale * d[k]);
+        }
+        ImpulseOutcome::Applied {
+            step,
+            root,
+            clamped,
+        }
+    }
+
+    /// Volume polynomial of `tet` when its particles move from their previewed positions along
+    /// the directions held in `scratch` (zero for particles that do not move).
+    #[inline]
+    fn moved_volume(&self, tet: [u32; 4]) -> Cubic {
+        let xp = tet.map(|i| self.preview(i));
+        let d = tet.map(|i| self.scratch.get(i as usize));
+        volume_polynomial(&xp, &d)
     }
 
     /// `None` when an impulse whose largest particle move is `largest_move` certainly leaves
@@ -647,8 +953,14 @@ impl SoftBodyState {
     /// which costs nothing; if that is not enough, with the largest drift among the region's
     /// own particles.
     #[inline]
-    fn clamp_drift(&self, region: usize, vertices: &[u32], largest_move: f32) -> Option<f32> {
-        let b = &self.clamp_bounds;
+    fn clamp_drift(
+        &self,
+        max_moved: f32,
+        region: usize,
+        vertices: &[u32],
+        largest_move: f32,
+    ) -> Option<f32> {
+        let b = self.bounds;
         if !b.active {
             return Some(f32::INFINITY);
         }
@@ -657,13 +969,13 @@ impl SoftBodyState {
             b.region_reach[region],
             b.region_slack[region],
         );
-        if drift_bound(b.max_moved + largest_move, grad, reach) < slack {
+        if drift_bound(max_moved + largest_move, grad, reach) < slack {
             return None;
         }
         // Then one vertex at a time: every tet the impulse touches is in the one-ring of one of
         // `vertices`, and its particles are ring vertices of that vertex; so if each vertex's
         // one-ring is safe with the drift of its own ring vertices, all of them are.
-        let mesh = &self.mesh;
+        let mesh = self.mesh;
         let mut region_drift = 0.0f32;
         let mut safe = true;
         for &v in vertices {
@@ -671,7 +983,7 @@ impl SoftBodyState {
             let drift = mesh
                 .ring_vertices(v)
                 .iter()
-                .map(|&i| b.drift[i as usize])
+                .map(|&i| self.drift.get(i as usize))
                 .fold(0.0f32, larger);
             region_drift = larger(region_drift, drift);
             safe &= drift_bound(drift + largest_move, b.vertex_grad[v], b.vertex_reach[v])
@@ -692,17 +1004,17 @@ impl SoftBodyState {
         mut step: f64,
         drift: f32,
     ) -> f64 {
-        let mesh = &self.mesh;
-        let b = &self.clamp_bounds;
+        let mesh = self.mesh;
+        let b = self.bounds;
         for &t in tets {
             let tet = mesh.tets()[t as usize];
             let max_move = if b.active {
                 tet.iter()
-                    .map(|&i| b.move_len[i as usize])
+                    .map(|&i| self.move_len.get(i as usize))
                     .fold(0.0f32, larger)
             } else {
                 tet.iter()
-                    .map(|&i| self.scratch[i as usize].length_squared())
+                    .map(|&i| self.scratch.get(i as usize).length_squared())
                     .fold(0.0f32, larger)
                     .sqrt()
             };
@@ -715,7 +1027,7 @@ impl SoftBodyState {
                 let t = t as usize;
                 let own_drift = tet
                     .iter()
-                    .map(|&i| b.drift[i as usize])
+                    .map(|&i| self.drift.get(i as usize))
                     .fold(0.0f32, larger)
                     .min(drift);
                 if drift_bound(
@@ -764,19 +1076,24 @@ impl SoftBodyState {
     }
 
     /// Records (`set`) or clears the lengths of the directions of `vertices` for a clamp walk.
-    fn set_move_lengths(&mut self, vertices: &[u32], set: bool) {
-        if !self.clamp_bounds.active {
+    fn set_move_lengths(&self, vertices: &[u32], set: bool) {
+        if !self.bounds.active {
             return;
         }
         for &i in vertices {
             let i = i as usize;
-            self.clamp_bounds.move_len[i] = if set { self.scratch[i].length() } else { 0.0 };
+            let len = if set {
+                self.scratch.get(i).length()
+            } else {
+                0.0
+            };
+            self.move_len.set(i, len);
         }
     }
 
-    fn clear_directions(&mut self, vertices: &[u32]) {
+    fn clear_directions(&self, vertices: &[u32]) {
         for &i in vertices {
-            self.scratch[i as usize] = Vec3::ZERO;
+            self.scratch.set(i as usize, Vec3::ZERO);
         }
     }
 }

@@ -10,6 +10,7 @@ pub mod impulses;
 pub mod lanes;
 pub mod material;
 pub mod obj;
+pub mod parallel;
 pub mod roots;
 pub mod surface_mesh;
 pub mod tet_mesh;
@@ -27,8 +28,9 @@ pub use material::{
     ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod, XpbdSettings,
 };
 pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
+pub use parallel::{Parallel, Serial};
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
-pub use tet_mesh::{TetMesh, TetMeshError};
+pub use tet_mesh::{Slabs, TetMesh, TetMeshError};
 pub use tetgen::{TetGenError, TetGenFile, parse_tetgen, write_tetgen};
 pub use tetrahedralize::{
     Resolution, Tetrahedralization, TetrahedralizeError, face_components, tetrahedralize,

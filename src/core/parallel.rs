@@ -1,0 +1,116 @@
+//! Running the jobs of one pass on several threads without changing its result.
+//!
+//! The volume passes are Gauss-Seidel sweeps: each impulse sees the ones before it. They run in
+//! the order of the mesh's [`Slabs`](super::tet_mesh::Slabs): first every even slab, then every
+//! odd slab, each slab's items in index order. Slabs of one parity never touch what another of
+//! that parity writes, so they may run at the same time, and the result is the same bit for
+//! bit whether they run on one thread or many, in any order. The core spawns no threads: the
+//! caller passes a [`Parallel`] (the plugin's runs jobs on Bevy's compute task pool).
+
+use std::marker::PhantomData;
+use std::sync::atomic::AtomicBool;
+
+/// Something that runs independent jobs, possibly on several threads.
+pub trait Parallel: Sync {
+    /// Calls `job(i)` once for every `i` in `0..jobs`, in any order, on any threads, and
+    /// returns when all have returned.
+    fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync));
+
+    /// How many jobs can run at the same time: the most worth asking `run` for.
+    fn threads(&self) -> usize;
+}
+
+/// Runs the jobs one after another on the calling thread.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Serial;
+
+impl Parallel for Serial {
+    fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync)) {
+        for i in 0..jobs {
+            job(i);
+        }
+    }
+
+    fn threads(&self) -> usize {
+        1
+    }
+}
+
+/// A slice that jobs running at the same time may write, each at indices no other running job
+/// reads or writes. Bounds are checked; that no two jobs touch the same element is the caller's
+/// promise, kept by the slabs (see [`Slabs`](super::tet_mesh::Slabs) and its test).
+pub(crate) struct SharedSlice<'a, T> {
+    ptr: *mut T,
+    len: usize,
+    _borrow: PhantomData<&'a mut [T]>,
+}
+
+// Safety: elements are only reached through `get`/`set`, whose callers guarantee that no
+// element is written by one thread while another reads or writes it.
+unsafe impl<T: Send> Send for SharedSlice<'_, T> {}
+unsafe impl<T: Send> Sync for SharedSlice<'_, T> {}
+
+impl<'a, T> SharedSlice<'a, T> {
+    /// Shares `slice` for the lifetime of the borrow.
+    pub(crate) fn new(slice: &'a mut [T]) -> Self {
+        SharedSlice {
+            ptr: slice.as_mut_ptr(),
+            len: slice.len(),
+            _borrow: PhantomData,
+        }
+    }
+
+    /// Element `i`, for one job's own data (its index is its own).
+    ///
+    /// # Safety
+    /// No other job may touch element `i` while the returned reference lives.
+    #[inline(always)]
+    #[allow(clippy::mut_from_ref)]
+    pub(crate) unsafe fn get_mut(&self, i: usize) -> &mut T {
+        assert!(i < self.len);
+        unsafe { &mut *self.ptr.add(i) }
+    }
+}
+
+impl<T: Copy> SharedSlice<'_, T> {
+    /// Element `i`.
+    #[inline(always)]
+    pub(crate) fn get(&self, i: usize) -> T {
+        assert!(i < self.len);
+        // Safety: in bounds; no other job writes element `i` now (the slabs' promise).
+        unsafe { *self.ptr.add(i) }
+    }
+
+    /// Sets element `i`.
+    #[inline(always)]
+    pub(crate) fn set(&self, i: usize, value: T) {
+        assert!(i < self.len);
+        // Safety: in bounds; no other job reads or writes element `i` now (the slabs' promise).
+        unsafe { *self.ptr.add(i) = value }
+    }
+}
+
+/// One flag per slab: whether its job in the running pass is done. A clone has its own flags
+/// (all clear), so clones of a body can step at the same time.
+#[derive(Debug, Default)]
+pub(crate) struct SlabFlags(Box<[AtomicBool]>);
+
+impl SlabFlags {
+    /// `count` clear flags.
+    pub(crate) fn new(count: usize) -> SlabFlags {
+        SlabFlags((0..count).map(|_| AtomicBool::new(false)).collect())
+    }
+}
+
+impl Clone for SlabFlags {
+    fn clone(&self) -> SlabFlags {
+        SlabFlags::new(self.0.len())
+    }
+}
+
+impl std::ops::Deref for SlabFlags {
+    type Target = [AtomicBool];
+    fn deref(&self) -> &[AtomicBool] {
+        &self.0
+    }
+}
