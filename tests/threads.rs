@@ -1,7 +1,8 @@
-//! Results do not depend on the number of threads: the same scene of several bodies sharing a
-//! sphere, stepped with 1, 2 and 4 threads in Bevy's task pools, ends bit for bit the same. The
-//! pools are global to a process, so each thread count runs in a child process (this test binary
-//! again, told by an environment variable what to do).
+//! Results do not depend on the number of threads: the same scene, stepped with 1, 2 and 4
+//! threads in Bevy's task pools, ends bit for bit the same, both for several bodies sharing a
+//! sphere (bodies in parallel) and for one large body (its blocks in parallel). The pools are
+//! global to a process, so each thread count runs in a child process (this test binary again,
+//! told by an environment variable what to do).
 
 use std::process::Command;
 use std::time::Duration;
@@ -13,9 +14,10 @@ use bevy_soft_body::prelude::*;
 
 const CHILD: &str = "BEVY_SOFT_BODY_THREADS_CHILD";
 
-/// Steps four bodies (two methods), a sphere landing across two of them and the ground, and
-/// returns every particle's and the sphere's final position, as bits.
-fn simulate(threads: usize) -> Vec<u32> {
+/// Steps four bodies (two methods), a sphere landing across two of them and the ground, or
+/// (`one_body`) one body of 8640 tets with a sphere landing on it, and returns every particle's
+/// and the sphere's final position, as bits.
+fn simulate(threads: usize, one_body: bool) -> Vec<u32> {
     // `threads` threads in the compute pool, where the systems and the bodies run.
     let mut options = TaskPoolOptions::with_num_threads(threads + 2);
     options.compute.min_threads = threads;
@@ -31,10 +33,27 @@ fn simulate(threads: usize) -> Vec<u32> {
         Duration::from_millis(10),
     ))
     .insert_resource(SoftBodyGravity(Vec3::new(0.0, -2.0, 0.0)));
+    if one_body {
+        let mesh = box_grid(UVec3::splat(12), Vec3::splat(0.05), Vec3::ZERO).unwrap();
+        // Enough blocks for every thread.
+        assert!(mesh.slabs().count() >= 16, "{}", mesh.slabs().count());
+        let material = SoftBodyMaterial {
+            distance_stiffness: 0.2,
+            ..Default::default()
+        };
+        app.world_mut().spawn((
+            SoftBody::new(mesh.into(), material).unwrap(),
+            Transform::from_xyz(0.0, 0.01, 0.0),
+        ));
+        app.world_mut().spawn((
+            RigidSphere::new(0.25, 60.0),
+            Transform::from_xyz(0.3, 0.9, 0.3),
+        ));
+    }
     let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO)
         .unwrap()
         .into();
-    for k in 0..4 {
+    for k in (0..4).filter(|_| !one_body) {
         let method = if k % 2 == 0 {
             VolumeMethod::PAPER_IMPULSES
         } else {
@@ -50,10 +69,12 @@ fn simulate(threads: usize) -> Vec<u32> {
         ));
     }
     // Lands on the first two bodies at once.
-    app.world_mut().spawn((
-        RigidSphere::new(0.2, 30.0),
-        Transform::from_xyz(0.42, 0.75, 0.2),
-    ));
+    if !one_body {
+        app.world_mut().spawn((
+            RigidSphere::new(0.2, 30.0),
+            Transform::from_xyz(0.42, 0.75, 0.2),
+        ));
+    }
     app.world_mut()
         .spawn((StaticCollider::ground(0.6), Transform::default()));
     for _ in 0..120 {
@@ -72,10 +93,10 @@ fn simulate(threads: usize) -> Vec<u32> {
     bits
 }
 
-#[test]
-fn results_do_not_depend_on_the_thread_count() {
+/// Runs `test` in a child process per thread count (1, 2, 4) and checks that all agree.
+fn compare_thread_counts(test: &str, one_body: bool) {
     if let Ok(threads) = std::env::var(CHILD) {
-        let bits = simulate(threads.parse().unwrap());
+        let bits = simulate(threads.parse().unwrap(), one_body);
         let hash = bits.iter().fold(0xcbf29ce484222325u64, |h, &b| {
             (h ^ b as u64).wrapping_mul(0x100000001b3)
         });
@@ -84,11 +105,7 @@ fn results_do_not_depend_on_the_thread_count() {
     }
     let run = |threads: usize| {
         let out = Command::new(std::env::current_exe().unwrap())
-            .args([
-                "results_do_not_depend_on_the_thread_count",
-                "--exact",
-                "--nocapture",
-            ])
+            .args([test, "--exact", "--nocapture"])
             .env(CHILD, threads.to_string())
             .output()
             .unwrap();
@@ -107,4 +124,17 @@ fn results_do_not_depend_on_the_thread_count() {
     for threads in [2, 4] {
         assert_eq!(run(threads), one, "{threads} threads differ from one");
     }
+}
+
+#[test]
+fn results_do_not_depend_on_the_thread_count() {
+    compare_thread_counts("results_do_not_depend_on_the_thread_count", false);
+}
+
+#[test]
+fn one_body_in_blocks_does_not_depend_on_the_thread_count() {
+    compare_thread_counts(
+        "one_body_in_blocks_does_not_depend_on_the_thread_count",
+        true,
+    );
 }
