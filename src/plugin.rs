@@ -336,16 +336,26 @@ impl Parallel for ComputePool {
     }
 }
 
-/// How the volume passes of each body use the threads: with fewer bodies than threads, each
-/// body's slabs run in parallel too; with more, the bodies alone keep the threads busy. The
-/// result is the same either way (see `core::parallel`).
-fn pass_parallelism(bodies: &Query<(&mut SoftBody, &mut SoftBodyStats)>) -> &'static dyn Parallel {
-    let threads = bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num());
-    if bodies.iter().count() < threads {
+/// Bodies with fewer tets than this run their volume passes on one thread: their blocks are
+/// too small to pay for waking another (about 50 microseconds here), measured with the
+/// `bench` example's 1k-tet box.
+pub const PARALLEL_PASS_MIN_TETS: usize = 2000;
+
+/// How the volume passes of each body use the threads: with fewer bodies than threads
+/// (`few_bodies`), each large body's blocks run in parallel too; with more, the bodies alone
+/// keep the threads busy. The result is the same either way (see `core::parallel`).
+fn pass_parallelism(few_bodies: bool, body: &SoftBodyState) -> &'static dyn Parallel {
+    if few_bodies && body.mesh().tet_count() >= PARALLEL_PASS_MIN_TETS {
         &ComputePool
     } else {
         &Serial
     }
+}
+
+/// Whether there are fewer bodies than compute threads.
+fn few_bodies(bodies: &Query<(&mut SoftBody, &mut SoftBodyStats)>) -> bool {
+    let threads = bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num());
+    bodies.iter().count() < threads
 }
 
 /// Runs `stage` on every body, in parallel on the compute task pool, timing each body.
@@ -482,10 +492,10 @@ fn one_ring(
         return;
     }
     let start = Instant::now();
-    let parallel = pass_parallelism(&bodies);
+    let few = few_bodies(&bodies);
     par_with_spheres(&mut bodies, &mut solver, |s, spheres, colliders| {
         let contacts = s.xpbd_pass(h, spheres, colliders);
-        s.one_ring_pass_on(h, spheres, parallel);
+        s.one_ring_pass_on(h, spheres, pass_parallelism(few, s));
         contacts
     });
     clock.current += start.elapsed();
@@ -502,9 +512,9 @@ fn per_tet(
         return;
     }
     let start = Instant::now();
-    let parallel = pass_parallelism(&bodies);
+    let few = few_bodies(&bodies);
     par_with_spheres(&mut bodies, &mut solver, |s, spheres, _| {
-        s.per_tet_pass_on(h, spheres, parallel);
+        s.per_tet_pass_on(h, spheres, pass_parallelism(few, s));
         0
     });
     clock.current += start.elapsed();
