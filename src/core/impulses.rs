@@ -765,7 +765,7 @@ impl PassView<'_> {
             let mut d = [Vec3x4::ZERO; 4];
             for k in 0..4 {
                 let w = f32x4::new(gather_f32(&work.inv_masses, &tet_corners, k));
-                stiffness = stiffness + w * g[k].length_squared();
+                stiffness += w * g[k].length_squared();
                 d[k] = g[k].scale(-w * lanes.error);
             }
             let (errors, stiffness) = (lanes.error.to_array(), stiffness.to_array());
