@@ -38,7 +38,7 @@ use super::contacts::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_with_edges};
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
-use super::parallel::{Parallel, Serial, SharedSlice};
+use super::parallel::{Parallel, Serial, SharedCell, SharedSlice};
 use super::roots::{Cubic, first_crossing, monotone_root};
 use super::tet_mesh::{Csr, TetMesh};
 
@@ -96,6 +96,132 @@ pub(crate) struct ClampBounds {
     region_reach: Vec<f32>,
     /// Previews at the start of the pass: a particle's drift is its distance from here.
     start: Vec<Vec3>,
+}
+
+impl ClampBounds {
+    /// Computes the bounds of the coming pass from `previews`, and clears the particles'
+    /// `drift`. Needs [`ClampBounds::reserve`] first; allocates nothing.
+    fn compute(
+        &mut self,
+        mesh: &TetMesh,
+        regions: ClampRegions,
+        previews: &[Vec3],
+        drift: &mut [f32],
+    ) {
+        let b = self;
+        // Four tets at a time (see `lanes`), the tail padded with collapsed tets.
+        let (tets, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
+        for start in (0..tets.len()).step_by(LANES) {
+            let n = LANES.min(tets.len() - start);
+            let corner = |k: usize| {
+                Vec3x4::from_vecs(std::array::from_fn(|l| {
+                    if l < n {
+                        previews[tets[start + l][k] as usize]
+                    } else {
+                        Vec3::ZERO
+                    }
+                }))
+            };
+            let xd = corner(3);
+            let e = [corner(0) - xd, corner(1) - xd, corner(2) - xd];
+            let sixth = f32x4::splat(SIXTH);
+            let ga = e[1].cross(e[2]).scale(sixth);
+            let gb = e[2].cross(e[0]).scale(sixth);
+            let gc = e[0].cross(e[1]).scale(sixth);
+            let gd = -(ga + gb + gc);
+            let volume = e[0].dot(ga).to_array();
+            let grad = (ga.length_squared().sqrt()
+                + gb.length_squared().sqrt()
+                + gc.length_squared().sqrt()
+                + gd.length_squared().sqrt())
+            .to_array();
+            let reach = e[0]
+                .length_squared()
+                .max(e[1].length_squared())
+                .max(e[2].length_squared())
+                .sqrt()
+                .to_array();
+            for l in 0..n {
+                let t = start + l;
+                let (volume, v0) = (volume[l], rest_volumes[t]);
+                let eps = CLAMP_FRACTION * v0;
+                // A tet below eps may lose half the slack over the pass, and must not get back
+                // above eps within the bound either: above eps, the exact rule would hold it
+                // there.
+                b.tet_slack[t] = if volume >= eps {
+                    volume - eps
+                } else if volume.is_finite() {
+                    (0.5 * CLAMP_SLACK * v0).min(eps - volume)
+                } else {
+                    // A broken preview: no bound is safe; every region holding it walks.
+                    f32::NEG_INFINITY
+                };
+                b.tet_grad[t] = grad[l];
+                b.tet_reach[t] = reach[l];
+            }
+        }
+        // A region is a union of one-rings: a ring's tets and border tets are the one-rings of
+        // its ring vertices, a tet and its neighbours the one-rings of its four vertices. So the
+        // region bounds are extremes over per-vertex extremes, which costs a few reads each.
+        for v in 0..mesh.vertex_count() {
+            let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
+            for &t in mesh.one_ring(v) {
+                slack = smaller(slack, b.tet_slack[t as usize]);
+                grad = larger(grad, b.tet_grad[t as usize]);
+                reach = larger(reach, b.tet_reach[t as usize]);
+            }
+            b.vertex_slack[v] = slack;
+            b.vertex_grad[v] = grad;
+            b.vertex_reach[v] = reach;
+        }
+        let count = match regions {
+            ClampRegions::Rings => mesh.vertex_count(),
+            ClampRegions::Tets => mesh.tet_count(),
+        };
+        for r in 0..count {
+            let vertices: &[u32] = match regions {
+                ClampRegions::Rings => mesh.ring_vertices(r),
+                ClampRegions::Tets => &mesh.tets()[r],
+            };
+            let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
+            for &v in vertices {
+                slack = smaller(slack, b.vertex_slack[v as usize]);
+                grad = larger(grad, b.vertex_grad[v as usize]);
+                reach = larger(reach, b.vertex_reach[v as usize]);
+            }
+            b.region_slack[r] = slack;
+            b.region_grad[r] = grad;
+            b.region_reach[r] = reach;
+        }
+        b.start.copy_from_slice(previews);
+        drift.fill(0.0);
+        b.active = true;
+    }
+
+    /// Sizes the arrays for a pass over `mesh` with `regions` (allocates only the first time).
+    fn reserve(&mut self, mesh: &TetMesh, regions: ClampRegions, motion: &mut ClampMotion) {
+        let (n, tets) = (mesh.vertex_count(), mesh.tet_count());
+        let count = match regions {
+            ClampRegions::Rings => n,
+            ClampRegions::Tets => tets,
+        };
+        for (array, len) in [
+            (&mut self.tet_slack, tets),
+            (&mut self.tet_grad, tets),
+            (&mut self.tet_reach, tets),
+            (&mut self.vertex_slack, n),
+            (&mut self.vertex_grad, n),
+            (&mut self.vertex_reach, n),
+            (&mut self.region_slack, count),
+            (&mut self.region_grad, count),
+            (&mut self.region_reach, count),
+            (&mut motion.drift, n),
+            (&mut motion.move_len, n),
+        ] {
+            array.resize(len, 0.0);
+        }
+        self.start.resize(n, Vec3::ZERO);
+    }
 }
 
 /// What the clamp bounds track while a pass runs, per particle.
@@ -291,14 +417,13 @@ impl SoftBodyState {
             return;
         }
         self.refresh_previews(h);
-        if settings.neighbour_clamp {
-            self.prepare_clamp_bounds(ClampRegions::Rings);
-        }
+        let regions = settings.neighbour_clamp.then_some(ClampRegions::Rings);
         let mesh = self.mesh.clone();
         self.run_slabs(
             h,
             spheres,
             parallel,
+            regions,
             &mesh.slabs().vertices,
             &|view, worker, p| {
                 view.ring_impulse(
@@ -334,14 +459,13 @@ impl SoftBodyState {
             return;
         }
         self.refresh_previews(h);
-        if settings.neighbour_clamp {
-            self.prepare_clamp_bounds(ClampRegions::Tets);
-        }
+        let regions = settings.neighbour_clamp.then_some(ClampRegions::Tets);
         let mesh = self.mesh.clone();
         self.run_slabs(
             h,
             spheres,
             parallel,
+            regions,
             &mesh.slabs().tets,
             &|view, worker, t| {
                 view.tet_impulse(worker, t as usize, &settings);
@@ -364,6 +488,7 @@ impl SoftBodyState {
         h: f32,
         spheres: &mut [RigidSphereState],
         parallel: &dyn Parallel,
+        clamp_regions: Option<ClampRegions>,
         slabs: &Csr,
         impulse: &(dyn Fn(&PassView, &mut PassWorker, u32) + Sync),
     ) {
@@ -376,33 +501,71 @@ impl SoftBodyState {
         for done in self.slab_done.iter() {
             done.store(false, Ordering::Relaxed);
         }
+        let clamp_regions = clamp_regions.filter(|_| !self.clamp_bounds.disabled);
+        if let Some(regions) = clamp_regions {
+            self.clamp_bounds
+                .reserve(&self.mesh, regions, &mut self.clamp_motion);
+        }
         {
-            let view = PassView {
-                mesh: &self.mesh,
-                h,
-                inv_masses: &self.inv_masses,
-                contact_normals: &self.contact_normals,
-                contact_kept: &self.contact_kept,
-                contact_sphere: &self.contact_sphere,
-                any_touching: !self.touching.is_empty(),
-                bounds: &self.clamp_bounds,
-                velocities: SharedSlice::new(&mut self.velocities),
-                previews: SharedSlice::new(&mut self.previews),
-                scratch: SharedSlice::new(&mut self.scratch),
-                drift: SharedSlice::new(&mut self.clamp_motion.drift),
-                move_len: SharedSlice::new(&mut self.clamp_motion.move_len),
-            };
+            let mesh = &*self.mesh;
+            let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
+            let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
+            let any_touching = !self.touching.is_empty();
+            let bounds = SharedCell::new(&mut self.clamp_bounds);
+            let velocities = SharedSlice::new(&mut self.velocities);
+            let previews = SharedSlice::new(&mut self.previews);
+            let scratch = SharedSlice::new(&mut self.scratch);
+            let drift = SharedSlice::new(&mut self.clamp_motion.drift);
+            let move_len = SharedSlice::new(&mut self.clamp_motion.move_len);
             let workers = SharedSlice::new(&mut self.pass_workers);
             let done = &self.slab_done;
-            let waits_for = &self.mesh.slabs().waits_for;
+            let waits_for = &mesh.slabs().waits_for;
             let count = slabs.len();
             let next = AtomicUsize::new(0);
+            // The clamp bounds are computed by the first task taken, while the threads that
+            // join later are still waking up; the others wait for them.
+            let bounds_ready = AtomicBool::new(clamp_regions.is_none());
+            let first = clamp_regions.is_some() as usize;
             let run = |_thread: usize| {
                 loop {
                     let task = next.fetch_add(1, Ordering::Relaxed);
+                    if let Some(regions) = clamp_regions
+                        && task == 0
+                    {
+                        // Safety: no other task reads the bounds, the previews or the drifts
+                        // before `bounds_ready`.
+                        unsafe {
+                            bounds.get_mut().compute(
+                                mesh,
+                                regions,
+                                previews.as_slice(),
+                                drift.as_mut_slice(),
+                            );
+                        }
+                        bounds_ready.store(true, Ordering::Release);
+                        continue;
+                    }
+                    let task = task - first;
                     if task >= count {
                         return;
                     }
+                    wait_for(&bounds_ready);
+                    let view = PassView {
+                        mesh,
+                        h,
+                        inv_masses,
+                        contact_normals,
+                        contact_kept,
+                        contact_sphere,
+                        any_touching,
+                        // Safety: computed, and not written again in this pass.
+                        bounds: unsafe { bounds.get() },
+                        velocities,
+                        previews,
+                        scratch,
+                        drift,
+                        move_len,
+                    };
                     // The particles this task reads were last moved by the tasks it waits for:
                     // their largest drift bounds those particles' drift.
                     let mut start_drift = 0.0f32;
@@ -505,115 +668,6 @@ impl SoftBodyState {
             drift: SharedSlice::new(&mut self.clamp_motion.drift),
             move_len: SharedSlice::new(&mut self.clamp_motion.move_len),
         }
-    }
-
-    /// Computes the [`ClampBounds`] of the coming pass from the current previews.
-    fn prepare_clamp_bounds(&mut self, regions: ClampRegions) {
-        if self.clamp_bounds.disabled {
-            return;
-        }
-        let mesh = self.mesh.clone();
-        let b = &mut self.clamp_bounds;
-        b.tet_slack.resize(mesh.tet_count(), 0.0);
-        b.tet_grad.resize(mesh.tet_count(), 0.0);
-        b.tet_reach.resize(mesh.tet_count(), 0.0);
-        // Four tets at a time (see `lanes`), the tail padded with collapsed tets.
-        let (tets, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
-        for start in (0..tets.len()).step_by(LANES) {
-            let n = LANES.min(tets.len() - start);
-            let corner = |k: usize| {
-                Vec3x4::from_vecs(std::array::from_fn(|l| {
-                    if l < n {
-                        self.previews[tets[start + l][k] as usize]
-                    } else {
-                        Vec3::ZERO
-                    }
-                }))
-            };
-            let xd = corner(3);
-            let e = [corner(0) - xd, corner(1) - xd, corner(2) - xd];
-            let sixth = f32x4::splat(SIXTH);
-            let ga = e[1].cross(e[2]).scale(sixth);
-            let gb = e[2].cross(e[0]).scale(sixth);
-            let gc = e[0].cross(e[1]).scale(sixth);
-            let gd = -(ga + gb + gc);
-            let volume = e[0].dot(ga).to_array();
-            let grad = (ga.length_squared().sqrt()
-                + gb.length_squared().sqrt()
-                + gc.length_squared().sqrt()
-                + gd.length_squared().sqrt())
-            .to_array();
-            let reach = e[0]
-                .length_squared()
-                .max(e[1].length_squared())
-                .max(e[2].length_squared())
-                .sqrt()
-                .to_array();
-            for l in 0..n {
-                let t = start + l;
-                let (volume, v0) = (volume[l], rest_volumes[t]);
-                let eps = CLAMP_FRACTION * v0;
-                // A tet below eps may lose half the slack over the pass, and must not get back
-                // above eps within the bound either: above eps, the exact rule would hold it
-                // there.
-                b.tet_slack[t] = if volume >= eps {
-                    volume - eps
-                } else if volume.is_finite() {
-                    (0.5 * CLAMP_SLACK * v0).min(eps - volume)
-                } else {
-                    // A broken preview: no bound is safe; every region holding it walks.
-                    f32::NEG_INFINITY
-                };
-                b.tet_grad[t] = grad[l];
-                b.tet_reach[t] = reach[l];
-            }
-        }
-        // A region is a union of one-rings: a ring's tets and border tets are the one-rings of
-        // its ring vertices, a tet and its neighbours the one-rings of its four vertices. So the
-        // region bounds are extremes over per-vertex extremes, which costs a few reads each.
-        b.vertex_slack.resize(mesh.vertex_count(), 0.0);
-        b.vertex_grad.resize(mesh.vertex_count(), 0.0);
-        b.vertex_reach.resize(mesh.vertex_count(), 0.0);
-        for v in 0..mesh.vertex_count() {
-            let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
-            for &t in mesh.one_ring(v) {
-                slack = smaller(slack, b.tet_slack[t as usize]);
-                grad = larger(grad, b.tet_grad[t as usize]);
-                reach = larger(reach, b.tet_reach[t as usize]);
-            }
-            b.vertex_slack[v] = slack;
-            b.vertex_grad[v] = grad;
-            b.vertex_reach[v] = reach;
-        }
-        let count = match regions {
-            ClampRegions::Rings => mesh.vertex_count(),
-            ClampRegions::Tets => mesh.tet_count(),
-        };
-        b.region_slack.resize(count, 0.0);
-        b.region_grad.resize(count, 0.0);
-        b.region_reach.resize(count, 0.0);
-        for r in 0..count {
-            let vertices: &[u32] = match regions {
-                ClampRegions::Rings => mesh.ring_vertices(r),
-                ClampRegions::Tets => &mesh.tets()[r],
-            };
-            let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
-            for &v in vertices {
-                slack = smaller(slack, b.vertex_slack[v as usize]);
-                grad = larger(grad, b.vertex_grad[v as usize]);
-                reach = larger(reach, b.vertex_reach[v as usize]);
-            }
-            b.region_slack[r] = slack;
-            b.region_grad[r] = grad;
-            b.region_reach[r] = reach;
-        }
-        b.start.clear();
-        b.start.extend_from_slice(&self.previews);
-        let motion = &mut self.clamp_motion;
-        motion.drift.clear();
-        motion.drift.resize(self.previews.len(), 0.0);
-        motion.move_len.resize(self.previews.len(), 0.0);
-        b.active = true;
     }
 }
 
