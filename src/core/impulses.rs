@@ -28,6 +28,7 @@
 //!
 //! [`StepCounters`]: super::body::StepCounters
 
+use std::ops::Range;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
 use glam::Vec3;
@@ -38,7 +39,7 @@ use super::contacts::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_with_edges};
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
-use super::parallel::{Parallel, Serial, SharedCell, SharedSlice};
+use super::parallel::{Parallel, Serial, SharedSlice};
 use super::roots::{Cubic, first_crossing, monotone_root};
 use super::tet_mesh::{Csr, TetMesh};
 
@@ -99,24 +100,80 @@ pub(crate) struct ClampBounds {
 }
 
 impl ClampBounds {
-    /// Computes the bounds of the coming pass from `previews`, and clears the particles'
-    /// `drift`. Needs [`ClampBounds::reserve`] first; allocates nothing.
-    fn compute(
-        &mut self,
-        mesh: &TetMesh,
-        regions: ClampRegions,
-        previews: &[Vec3],
-        drift: &mut [f32],
-    ) {
-        let b = self;
-        // Four tets at a time (see `lanes`), the tail padded with collapsed tets.
-        let (tets, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
-        for start in (0..tets.len()).step_by(LANES) {
-            let n = LANES.min(tets.len() - start);
+    /// The arrays, for the jobs of a pass to fill and then read (see [`BoundsView`]).
+    fn view(&mut self) -> BoundsView<'_> {
+        BoundsView {
+            active: self.active,
+            tet_slack: SharedSlice::new(&mut self.tet_slack),
+            tet_grad: SharedSlice::new(&mut self.tet_grad),
+            tet_reach: SharedSlice::new(&mut self.tet_reach),
+            vertex_slack: SharedSlice::new(&mut self.vertex_slack),
+            vertex_grad: SharedSlice::new(&mut self.vertex_grad),
+            vertex_reach: SharedSlice::new(&mut self.vertex_reach),
+            region_slack: SharedSlice::new(&mut self.region_slack),
+            region_grad: SharedSlice::new(&mut self.region_grad),
+            region_reach: SharedSlice::new(&mut self.region_reach),
+            start: SharedSlice::new(&mut self.start),
+        }
+    }
+
+    /// Sizes the arrays for a pass over `mesh` with `regions` (allocates only the first time).
+    fn reserve(&mut self, mesh: &TetMesh, regions: ClampRegions, motion: &mut ClampMotion) {
+        let (n, tets) = (mesh.vertex_count(), mesh.tet_count());
+        let count = match regions {
+            ClampRegions::Rings => n,
+            ClampRegions::Tets => tets,
+        };
+        for (array, len) in [
+            (&mut self.tet_slack, tets),
+            (&mut self.tet_grad, tets),
+            (&mut self.tet_reach, tets),
+            (&mut self.vertex_slack, n),
+            (&mut self.vertex_grad, n),
+            (&mut self.vertex_reach, n),
+            (&mut self.region_slack, count),
+            (&mut self.region_grad, count),
+            (&mut self.region_reach, count),
+            (&mut motion.drift, n),
+            (&mut motion.move_len, n),
+        ] {
+            array.resize(len, 0.0);
+        }
+        self.start.resize(n, Vec3::ZERO);
+    }
+}
+
+/// [`ClampBounds`] during a pass: computed by the pass's first jobs, each writing its own
+/// range of tets, vertices or regions, then only read.
+#[derive(Clone, Copy)]
+pub(crate) struct BoundsView<'a> {
+    active: bool,
+    tet_slack: SharedSlice<'a, f32>,
+    tet_grad: SharedSlice<'a, f32>,
+    tet_reach: SharedSlice<'a, f32>,
+    vertex_slack: SharedSlice<'a, f32>,
+    vertex_grad: SharedSlice<'a, f32>,
+    vertex_reach: SharedSlice<'a, f32>,
+    region_slack: SharedSlice<'a, f32>,
+    region_grad: SharedSlice<'a, f32>,
+    region_reach: SharedSlice<'a, f32>,
+    start: SharedSlice<'a, Vec3>,
+}
+
+/// Tets, vertices or regions per job of the clamp bounds' computation.
+const BOUNDS_CHUNK: usize = 512;
+
+impl BoundsView<'_> {
+    /// The slack, gradient sum and reach of `tets` at `previews`, four tets at a time (see
+    /// `lanes`), the tail padded with collapsed tets.
+    fn compute_tets(&self, mesh: &TetMesh, previews: SharedSlice<Vec3>, tets: Range<usize>) {
+        let (all, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
+        for start in tets.clone().step_by(LANES) {
+            let n = LANES.min(tets.end - start);
             let corner = |k: usize| {
                 Vec3x4::from_vecs(std::array::from_fn(|l| {
                     if l < n {
-                        previews[tets[start + l][k] as usize]
+                        previews.get(all[start + l][k] as usize)
                     } else {
                         Vec3::ZERO
                     }
@@ -148,7 +205,7 @@ impl ClampBounds {
                 // A tet below eps may lose half the slack over the pass, and must not get back
                 // above eps within the bound either: above eps, the exact rule would hold it
                 // there.
-                b.tet_slack[t] = if volume >= eps {
+                let slack = if volume >= eps {
                     volume - eps
                 } else if volume.is_finite() {
                     (0.5 * CLAMP_SLACK * v0).min(eps - volume)
@@ -156,71 +213,56 @@ impl ClampBounds {
                     // A broken preview: no bound is safe; every region holding it walks.
                     f32::NEG_INFINITY
                 };
-                b.tet_grad[t] = grad[l];
-                b.tet_reach[t] = reach[l];
+                self.tet_slack.set(t, slack);
+                self.tet_grad.set(t, grad[l]);
+                self.tet_reach.set(t, reach[l]);
             }
         }
-        // A region is a union of one-rings: a ring's tets and border tets are the one-rings of
-        // its ring vertices, a tet and its neighbours the one-rings of its four vertices. So the
-        // region bounds are extremes over per-vertex extremes, which costs a few reads each.
-        for v in 0..mesh.vertex_count() {
+    }
+
+    /// The extremes of the tet bounds over each vertex's one-ring, for `vertices`; and their
+    /// start of the pass (`previews`, zero `drift`). Needs every tet's bounds.
+    fn compute_vertices(
+        &self,
+        mesh: &TetMesh,
+        previews: SharedSlice<Vec3>,
+        drift: SharedSlice<f32>,
+        vertices: Range<usize>,
+    ) {
+        for v in vertices {
             let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
             for &t in mesh.one_ring(v) {
-                slack = smaller(slack, b.tet_slack[t as usize]);
-                grad = larger(grad, b.tet_grad[t as usize]);
-                reach = larger(reach, b.tet_reach[t as usize]);
+                slack = smaller(slack, self.tet_slack.get(t as usize));
+                grad = larger(grad, self.tet_grad.get(t as usize));
+                reach = larger(reach, self.tet_reach.get(t as usize));
             }
-            b.vertex_slack[v] = slack;
-            b.vertex_grad[v] = grad;
-            b.vertex_reach[v] = reach;
+            self.vertex_slack.set(v, slack);
+            self.vertex_grad.set(v, grad);
+            self.vertex_reach.set(v, reach);
+            self.start.set(v, previews.get(v));
+            drift.set(v, 0.0);
         }
-        let count = match regions {
-            ClampRegions::Rings => mesh.vertex_count(),
-            ClampRegions::Tets => mesh.tet_count(),
-        };
-        for r in 0..count {
+    }
+
+    /// The extremes of the vertex bounds over each region in `range`. A region is a union of
+    /// one-rings: a ring's tets and border tets are the one-rings of its ring vertices, a tet
+    /// and its neighbours the one-rings of its four vertices. Needs every vertex's bounds.
+    fn compute_regions(&self, mesh: &TetMesh, regions: ClampRegions, range: Range<usize>) {
+        for r in range {
             let vertices: &[u32] = match regions {
                 ClampRegions::Rings => mesh.ring_vertices(r),
                 ClampRegions::Tets => &mesh.tets()[r],
             };
             let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
             for &v in vertices {
-                slack = smaller(slack, b.vertex_slack[v as usize]);
-                grad = larger(grad, b.vertex_grad[v as usize]);
-                reach = larger(reach, b.vertex_reach[v as usize]);
+                slack = smaller(slack, self.vertex_slack.get(v as usize));
+                grad = larger(grad, self.vertex_grad.get(v as usize));
+                reach = larger(reach, self.vertex_reach.get(v as usize));
             }
-            b.region_slack[r] = slack;
-            b.region_grad[r] = grad;
-            b.region_reach[r] = reach;
+            self.region_slack.set(r, slack);
+            self.region_grad.set(r, grad);
+            self.region_reach.set(r, reach);
         }
-        b.start.copy_from_slice(previews);
-        drift.fill(0.0);
-        b.active = true;
-    }
-
-    /// Sizes the arrays for a pass over `mesh` with `regions` (allocates only the first time).
-    fn reserve(&mut self, mesh: &TetMesh, regions: ClampRegions, motion: &mut ClampMotion) {
-        let (n, tets) = (mesh.vertex_count(), mesh.tet_count());
-        let count = match regions {
-            ClampRegions::Rings => n,
-            ClampRegions::Tets => tets,
-        };
-        for (array, len) in [
-            (&mut self.tet_slack, tets),
-            (&mut self.tet_grad, tets),
-            (&mut self.tet_reach, tets),
-            (&mut self.vertex_slack, n),
-            (&mut self.vertex_grad, n),
-            (&mut self.vertex_reach, n),
-            (&mut self.region_slack, count),
-            (&mut self.region_grad, count),
-            (&mut self.region_reach, count),
-            (&mut motion.drift, n),
-            (&mut motion.move_len, n),
-        ] {
-            array.resize(len, 0.0);
-        }
-        self.start.resize(n, Vec3::ZERO);
     }
 }
 
@@ -235,11 +277,16 @@ pub(crate) struct ClampMotion {
     move_len: Vec<f32>,
 }
 
-/// Waits until `flag` is set by another thread (spinning first: slabs take well under a
-/// millisecond, less than a thread takes to be woken).
+/// Waits until `flag` is set by another thread.
 fn wait_for(flag: &AtomicBool) {
+    wait_until(|| flag.load(Ordering::Acquire));
+}
+
+/// Waits until `ready` holds, spinning first: blocks take well under a millisecond, less than
+/// a thread takes to be woken.
+fn wait_until(ready: impl Fn() -> bool) {
     let mut spins = 0u32;
-    while !flag.load(Ordering::Acquire) {
+    while !ready() {
         if spins < 1 << 14 {
             std::hint::spin_loop();
             spins += 1;
@@ -505,13 +552,14 @@ impl SoftBodyState {
         if let Some(regions) = clamp_regions {
             self.clamp_bounds
                 .reserve(&self.mesh, regions, &mut self.clamp_motion);
+            self.clamp_bounds.active = true;
         }
         {
             let mesh = &*self.mesh;
             let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
             let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
             let any_touching = !self.touching.is_empty();
-            let bounds = SharedCell::new(&mut self.clamp_bounds);
+            let bounds = self.clamp_bounds.view();
             let velocities = SharedSlice::new(&mut self.velocities);
             let previews = SharedSlice::new(&mut self.previews);
             let scratch = SharedSlice::new(&mut self.scratch);
@@ -522,34 +570,67 @@ impl SoftBodyState {
             let waits_for = &mesh.slabs().waits_for;
             let count = slabs.len();
             let next = AtomicUsize::new(0);
-            // The clamp bounds are computed by the first task taken, while the threads that
-            // join later are still waking up; the others wait for them.
-            let bounds_ready = AtomicBool::new(clamp_regions.is_none());
-            let first = clamp_regions.is_some() as usize;
+            // The clamp bounds are computed by the first tasks, in chunks: the tets', then
+            // the vertices' (which need all tets'), then the regions' (which need all
+            // vertices'); threads that join late (waking one takes longer than a chunk) find
+            // the work already going. The blocks wait for all of it.
+            let (n, tet_count) = (mesh.vertex_count(), mesh.tet_count());
+            let region_count = match clamp_regions {
+                Some(ClampRegions::Rings) => n,
+                Some(ClampRegions::Tets) => tet_count,
+                None => 0,
+            };
+            let chunks = |items: usize| match clamp_regions {
+                Some(_) => items.div_ceil(BOUNDS_CHUNK),
+                None => 0,
+            };
+            let phases = [chunks(tet_count), chunks(n), chunks(region_count)];
+            let phase_done = [
+                AtomicUsize::new(0),
+                AtomicUsize::new(0),
+                AtomicUsize::new(0),
+            ];
+            let first = phases.iter().sum::<usize>();
+            let wait_phase = |phase: usize| {
+                if phase_done[phase].load(Ordering::Acquire) < phases[phase] {
+                    wait_until(|| phase_done[phase].load(Ordering::Acquire) >= phases[phase]);
+                }
+            };
             let run = |_thread: usize| {
                 loop {
                     let task = next.fetch_add(1, Ordering::Relaxed);
-                    if let Some(regions) = clamp_regions
-                        && task == 0
-                    {
-                        // Safety: no other task reads the bounds, the previews or the drifts
-                        // before `bounds_ready`.
-                        unsafe {
-                            bounds.get_mut().compute(
-                                mesh,
-                                regions,
-                                previews.as_slice(),
-                                drift.as_mut_slice(),
-                            );
+                    if task < first {
+                        let (phase, chunk) = if task < phases[0] {
+                            (0, task)
+                        } else if task < phases[0] + phases[1] {
+                            (1, task - phases[0])
+                        } else {
+                            (2, task - phases[0] - phases[1])
+                        };
+                        let range = |items: usize| {
+                            BOUNDS_CHUNK * chunk..(BOUNDS_CHUNK * (chunk + 1)).min(items)
+                        };
+                        match phase {
+                            0 => bounds.compute_tets(mesh, previews, range(tet_count)),
+                            1 => {
+                                wait_phase(0);
+                                bounds.compute_vertices(mesh, previews, drift, range(n));
+                            }
+                            _ => {
+                                wait_phase(1);
+                                if let Some(regions) = clamp_regions {
+                                    bounds.compute_regions(mesh, regions, range(region_count));
+                                }
+                            }
                         }
-                        bounds_ready.store(true, Ordering::Release);
+                        phase_done[phase].fetch_add(1, Ordering::Release);
                         continue;
                     }
                     let task = task - first;
                     if task >= count {
                         return;
                     }
-                    wait_for(&bounds_ready);
+                    wait_phase(2);
                     let view = PassView {
                         mesh,
                         h,
@@ -558,8 +639,7 @@ impl SoftBodyState {
                         contact_kept,
                         contact_sphere,
                         any_touching,
-                        // Safety: computed, and not written again in this pass.
-                        bounds: unsafe { bounds.get() },
+                        bounds,
                         velocities,
                         previews,
                         scratch,
@@ -661,7 +741,7 @@ impl SoftBodyState {
             contact_kept: &self.contact_kept,
             contact_sphere: &self.contact_sphere,
             any_touching: !self.touching.is_empty(),
-            bounds: &self.clamp_bounds,
+            bounds: self.clamp_bounds.view(),
             velocities: SharedSlice::new(&mut self.velocities),
             previews: SharedSlice::new(&mut self.previews),
             scratch: SharedSlice::new(&mut self.scratch),
@@ -681,7 +761,7 @@ pub(crate) struct PassView<'a> {
     contact_kept: &'a [f32],
     contact_sphere: &'a [u32],
     any_touching: bool,
-    bounds: &'a ClampBounds,
+    bounds: BoundsView<'a>,
     velocities: SharedSlice<'a, Vec3>,
     /// Previewed positions `x + h v`, kept up to date with every velocity change.
     previews: SharedSlice<'a, Vec3>,
@@ -721,7 +801,7 @@ impl PassView<'_> {
         let preview = self.previews.get(i) + self.h * dv;
         self.previews.set(i, preview);
         if self.bounds.active {
-            let drift = (preview - self.bounds.start[i]).length();
+            let drift = (preview - self.bounds.start.get(i)).length();
             self.drift.set(i, drift);
             worker.max_moved = larger(worker.max_moved, drift);
         }
@@ -1019,9 +1099,9 @@ impl PassView<'_> {
             return Some(f32::INFINITY);
         }
         let (grad, reach, slack) = (
-            b.region_grad[region],
-            b.region_reach[region],
-            b.region_slack[region],
+            b.region_grad.get(region),
+            b.region_reach.get(region),
+            b.region_slack.get(region),
         );
         if drift_bound(max_moved + largest_move, grad, reach) < slack {
             return None;
@@ -1040,8 +1120,11 @@ impl PassView<'_> {
                 .map(|&i| self.drift.get(i as usize))
                 .fold(0.0f32, larger);
             region_drift = larger(region_drift, drift);
-            safe &= drift_bound(drift + largest_move, b.vertex_grad[v], b.vertex_reach[v])
-                < b.vertex_slack[v];
+            safe &= drift_bound(
+                drift + largest_move,
+                b.vertex_grad.get(v),
+                b.vertex_reach.get(v),
+            ) < b.vertex_slack.get(v);
         }
         (!safe).then_some(region_drift)
     }
@@ -1086,9 +1169,9 @@ impl PassView<'_> {
                     .min(drift);
                 if drift_bound(
                     own_drift + step as f32 * max_move,
-                    b.tet_grad[t],
-                    b.tet_reach[t],
-                ) < b.tet_slack[t]
+                    b.tet_grad.get(t),
+                    b.tet_reach.get(t),
+                ) < b.tet_slack.get(t)
                 {
                     continue;
                 }

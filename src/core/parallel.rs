@@ -80,24 +80,7 @@ impl<'a, T> SharedSlice<'a, T> {
     }
 }
 
-impl<'a, T: Copy> SharedSlice<'a, T> {
-    /// The whole slice, to read.
-    ///
-    /// # Safety
-    /// Nothing may write it while the returned slice lives.
-    pub(crate) unsafe fn as_slice(&self) -> &'a [T] {
-        unsafe { std::slice::from_raw_parts(self.ptr, self.len) }
-    }
-
-    /// The whole slice, to write.
-    ///
-    /// # Safety
-    /// Nothing else may read or write it while the returned slice lives.
-    #[allow(clippy::mut_from_ref)]
-    pub(crate) unsafe fn as_mut_slice(&self) -> &'a mut [T] {
-        unsafe { std::slice::from_raw_parts_mut(self.ptr, self.len) }
-    }
-
+impl<T: Copy> SharedSlice<'_, T> {
     /// Element `i`.
     #[inline(always)]
     pub(crate) fn get(&self, i: usize) -> T {
@@ -112,43 +95,6 @@ impl<'a, T: Copy> SharedSlice<'a, T> {
         assert!(i < self.len);
         // Safety: in bounds; no other job reads or writes element `i` now (the slabs' promise).
         unsafe { *self.ptr.add(i) = value }
-    }
-}
-
-/// One value that one job of a pass writes, and the others read after it is done.
-pub(crate) struct SharedCell<'a, T> {
-    ptr: *mut T,
-    _borrow: PhantomData<&'a mut T>,
-}
-
-// Safety: as for `SharedSlice`: the callers order writes and reads.
-unsafe impl<T: Send + Sync> Send for SharedCell<'_, T> {}
-unsafe impl<T: Send + Sync> Sync for SharedCell<'_, T> {}
-
-impl<'a, T> SharedCell<'a, T> {
-    /// Shares `value` for the lifetime of the borrow.
-    pub(crate) fn new(value: &'a mut T) -> Self {
-        SharedCell {
-            ptr: value,
-            _borrow: PhantomData,
-        }
-    }
-
-    /// The value, to read.
-    ///
-    /// # Safety
-    /// Nothing may write it while the returned reference lives.
-    pub(crate) unsafe fn get(&self) -> &'a T {
-        unsafe { &*self.ptr }
-    }
-
-    /// The value, to write.
-    ///
-    /// # Safety
-    /// Nothing else may read or write it while the returned reference lives.
-    #[allow(clippy::mut_from_ref)]
-    pub(crate) unsafe fn get_mut(&self) -> &'a mut T {
-        unsafe { &mut *self.ptr }
     }
 }
 
