@@ -363,12 +363,18 @@ fn par_bodies(
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
     stage: impl Fn(&mut SoftBodyState, &mut SoftBodyStats) + Send + Sync,
 ) {
-    bodies.par_iter_mut().for_each(|(mut body, mut stats)| {
+    let run = |(mut body, mut stats): (Mut<SoftBody>, Mut<SoftBodyStats>)| {
         let body = &mut *body;
         let start = Instant::now();
         stage(&mut body.state, &mut stats);
         body.step_time += start.elapsed();
-    });
+    };
+    // One body: on this thread, not handed to another (which may first have to wake up).
+    if bodies.iter().len() == 1 {
+        bodies.iter_mut().for_each(run);
+    } else {
+        bodies.par_iter_mut().for_each(run);
+    }
 }
 
 /// Runs `pass` on every body in parallel, each against its own copy of the spheres as they were
@@ -385,14 +391,19 @@ fn par_with_spheres(
     solver.before.clear();
     solver.before.extend_from_slice(&solver.states);
     let (before, colliders) = (&solver.before, &solver.colliders);
-    bodies.par_iter_mut().for_each(|(mut body, mut stats)| {
+    let run = |(mut body, mut stats): (Mut<SoftBody>, Mut<SoftBodyStats>)| {
         let body = &mut *body;
         let start = Instant::now();
         body.spheres.clear();
         body.spheres.extend_from_slice(before);
         stats.contacts += pass(&mut body.state, &mut body.spheres, colliders);
         body.step_time += start.elapsed();
-    });
+    };
+    if bodies.iter().len() == 1 {
+        bodies.iter_mut().for_each(run);
+    } else {
+        bodies.par_iter_mut().for_each(run);
+    }
     if solver.states.is_empty() {
         return;
     }
