@@ -433,7 +433,10 @@ fn apply_forces(
     }
     let start = Instant::now();
     let g = gravity.0;
-    par_bodies(&mut bodies, |s, _| s.apply_forces(h, g));
+    let few = few_bodies(&bodies);
+    par_bodies(&mut bodies, |s, _| {
+        s.apply_forces_on(h, g, pass_parallelism(few, s))
+    });
     let solver_spheres = &mut *solver_spheres;
     solver_spheres.entities.clear();
     solver_spheres.states.clear();

@@ -15,6 +15,7 @@
 //!    ends a step inside one.
 
 use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::Vec3;
 
@@ -22,6 +23,7 @@ use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients};
 use super::impulses::{ClampMotion, PassWorker};
 use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
+use super::parallel::{Parallel, Serial, SharedSlice, SlabFlags, wait_for, wait_until};
 use super::tet_mesh::TetMesh;
 
 /// A particle index that does not exist in the body's mesh.
@@ -113,7 +115,7 @@ pub struct SoftBodyState {
     /// One per slab of the mesh: what each job of a volume pass owns.
     pub(crate) pass_workers: Vec<PassWorker>,
     /// One per slab: whether its job in the running pass is done.
-    pub(crate) slab_done: super::parallel::SlabFlags,
+    pub(crate) slab_done: SlabFlags,
     pub(crate) counters: StepCounters,
     /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
     pub(crate) gravity: Vec3,
@@ -152,7 +154,7 @@ impl SoftBodyState {
             touching: Vec::with_capacity(n),
             clamp_motion: ClampMotion::default(),
             pass_workers: vec![PassWorker::for_mesh(&mesh); mesh.slabs().count()],
-            slab_done: super::parallel::SlabFlags::new(mesh.slabs().count()),
+            slab_done: SlabFlags::new(2 * mesh.slabs().count()),
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
             sphere_positions: Vec::new(),
@@ -307,8 +309,31 @@ impl SoftBodyState {
         self.contact_sphere[i] = sphere.map_or(u32::MAX, |k| k as u32);
     }
 
+    /// The dampers of all springs, in index order (see [`damp_spring`]).
+    pub(crate) fn damp_springs(&mut self, h: f32, damping: f32) {
+        let velocities = SharedSlice::new(&mut self.velocities);
+        for &edge in self.mesh.edges() {
+            damp_spring(
+                edge,
+                &self.positions,
+                &self.inv_masses,
+                velocities,
+                h,
+                damping,
+            );
+        }
+    }
+
     /// Stage 1: external, spring and (baseline) volume forces change the velocities.
     pub fn apply_forces(&mut self, h: f32, gravity: Vec3) {
+        self.apply_forces_on(h, gravity, &Serial);
+    }
+
+    /// [`SoftBodyState::apply_forces`] with the mesh's blocks run by `parallel`: the same
+    /// result bit for bit on any number of threads (see [`super::parallel`]). Springs (and the
+    /// baseline's tets) add their forces block by block in the blocks' order, then each
+    /// particle's velocity takes its force, then the dampers act block by block, then drag.
+    pub fn apply_forces_on(&mut self, h: f32, gravity: Vec3, parallel: &dyn Parallel) {
         self.gravity = gravity;
         if self.material.method.is_xpbd() {
             // Gravity, springs, damping and drag act inside the substeps (`xpbd_pass`); only
@@ -319,88 +344,134 @@ impl SoftBodyState {
             }
             return;
         }
-        let forces = &mut self.scratch;
-        let x = &self.positions;
+        let mesh = &*self.mesh;
+        let slabs = mesh.slabs();
+        let count = slabs.count();
+        for done in self.slab_done.iter() {
+            done.store(false, Ordering::Relaxed);
+        }
         let k_d = self.material.distance_stiffness;
         let damping = self.material.damping;
-        for (e, &[i, j]) in self.mesh.edges().iter().enumerate() {
-            let (i, j) = (i as usize, j as usize);
-            let delta = x[j] - x[i];
-            let length = delta.length();
-            if length <= f32::EPSILON * self.spring_rest[e] {
-                continue;
-            }
-            let dir = delta / length;
-            let rest = self.spring_rest[e];
-            let f = dir * (k_d * (length - rest) / (rest * rest));
-            forces[i] += f;
-            forces[j] -= f;
-        }
-        if let VolumeMethod::Baseline { volume_stiffness } = self.material.method {
-            for (tet, &v0) in self.mesh.tets().iter().zip(self.mesh.rest_volumes()) {
-                let p = tet.map(|i| x[i as usize]);
-                let c = (signed_volume(&p) - v0) / v0;
-                let g = volume_gradients(&p);
-                let scale = -volume_stiffness * c / v0;
-                for k in 0..4 {
-                    forces[tet[k] as usize] += g[k] * scale;
-                }
-            }
-        }
-        for ((vel, f), &w) in self
-            .velocities
-            .iter_mut()
-            .zip(forces.iter_mut())
-            .zip(&self.inv_masses)
-        {
-            if w > 0.0 {
-                *vel += h * (gravity + *f * w);
-            }
-            *f = Vec3::ZERO;
-        }
-        if damping > 0.0 {
-            self.damp_springs(h, damping);
-        }
         let drag = self.material.linear_damping;
-        if drag > 0.0 {
-            let keep = 1.0 / (1.0 + h * drag);
-            for (vel, &w) in self.velocities.iter_mut().zip(&self.inv_masses) {
-                if w > 0.0 {
-                    *vel *= keep;
+        let volume_stiffness = match self.material.method {
+            VolumeMethod::Baseline { volume_stiffness } => Some(volume_stiffness),
+            _ => None,
+        };
+        let (x, inv_masses, spring_rest) = (
+            &self.positions[..],
+            &self.inv_masses[..],
+            &self.spring_rest[..],
+        );
+        let forces = SharedSlice::new(&mut self.scratch);
+        let velocities = SharedSlice::new(&mut self.velocities);
+        let done = &self.slab_done;
+        let n = x.len();
+        let chunks = n.div_ceil(PARTICLE_CHUNK);
+        // Tasks: the blocks' forces, the particles' velocities, the blocks' dampers, drag.
+        let phases = [
+            count,
+            chunks,
+            if damping > 0.0 { count } else { 0 },
+            if drag > 0.0 { chunks } else { 0 },
+        ];
+        let phase_done: [AtomicUsize; 4] = std::array::from_fn(|_| AtomicUsize::new(0));
+        let wait_phase = |phase: usize| {
+            wait_until(|| phase_done[phase].load(Ordering::Acquire) >= phases[phase]);
+        };
+        let next = AtomicUsize::new(0);
+        let total: usize = phases.iter().sum();
+        let run = |_thread: usize| {
+            loop {
+                let mut task = next.fetch_add(1, Ordering::Relaxed);
+                if task >= total {
+                    return;
                 }
+                let mut phase = 0;
+                while task >= phases[phase] {
+                    task -= phases[phase];
+                    phase += 1;
+                }
+                let particles = PARTICLE_CHUNK * task..(PARTICLE_CHUNK * (task + 1)).min(n);
+                match phase {
+                    0 => {
+                        for &earlier in slabs.waits_for.row(task) {
+                            wait_for(&done[earlier as usize]);
+                        }
+                        for &e in slabs.edges.row(task) {
+                            let e = e as usize;
+                            let [i, j] = mesh.edges()[e].map(|i| i as usize);
+                            let delta = x[j] - x[i];
+                            let length = delta.length();
+                            let rest = spring_rest[e];
+                            if length <= f32::EPSILON * rest {
+                                continue;
+                            }
+                            let dir = delta / length;
+                            let f = dir * (k_d * (length - rest) / (rest * rest));
+                            forces.set(i, forces.get(i) + f);
+                            forces.set(j, forces.get(j) - f);
+                        }
+                        if let Some(volume_stiffness) = volume_stiffness {
+                            for &t in slabs.tets.row(task) {
+                                let tet = mesh.tets()[t as usize];
+                                let v0 = mesh.rest_volumes()[t as usize];
+                                let p = tet.map(|i| x[i as usize]);
+                                let c = (signed_volume(&p) - v0) / v0;
+                                let g = volume_gradients(&p);
+                                let scale = -volume_stiffness * c / v0;
+                                for k in 0..4 {
+                                    let i = tet[k] as usize;
+                                    forces.set(i, forces.get(i) + g[k] * scale);
+                                }
+                            }
+                        }
+                        done[task].store(true, Ordering::Release);
+                    }
+                    1 => {
+                        wait_phase(0);
+                        for i in particles {
+                            let w = inv_masses[i];
+                            if w > 0.0 {
+                                velocities
+                                    .set(i, velocities.get(i) + h * (gravity + forces.get(i) * w));
+                            }
+                            forces.set(i, Vec3::ZERO);
+                        }
+                    }
+                    2 => {
+                        wait_phase(1);
+                        for &earlier in slabs.waits_for.row(task) {
+                            wait_for(&done[count + earlier as usize]);
+                        }
+                        for &e in slabs.edges.row(task) {
+                            damp_spring(
+                                mesh.edges()[e as usize],
+                                x,
+                                inv_masses,
+                                velocities,
+                                h,
+                                damping,
+                            );
+                        }
+                        done[count + task].store(true, Ordering::Release);
+                    }
+                    _ => {
+                        wait_phase(2);
+                        let keep = 1.0 / (1.0 + h * drag);
+                        for i in particles {
+                            if inv_masses[i] > 0.0 {
+                                velocities.set(i, velocities.get(i) * keep);
+                            }
+                        }
+                    }
+                }
+                phase_done[phase].fetch_add(1, Ordering::Release);
             }
-        }
+        };
+        parallel.run(parallel.threads().clamp(1, count.max(1)), &run);
         for &(i, target) in &self.kinematic {
             let i = i as usize;
             self.velocities[i] = (target - self.positions[i]) / h;
-        }
-    }
-
-    /// Spring damping, solved implicitly one spring at a time: the damper of each spring
-    /// removes the fraction `c h (w_i + w_j) / (1 + c h (w_i + w_j))` of the relative velocity
-    /// along it, which is the exact implicit step of that damper alone. An explicit damping
-    /// force overshoots on light particles (a grid corner weighs 1/40 of an interior particle)
-    /// as soon as the damping is strong enough to matter; this cannot, and it conserves
-    /// momentum.
-    pub(crate) fn damp_springs(&mut self, h: f32, damping: f32) {
-        let x = &self.positions;
-        for &[i, j] in self.mesh.edges() {
-            let (i, j) = (i as usize, j as usize);
-            let w_sum = self.inv_masses[i] + self.inv_masses[j];
-            if w_sum == 0.0 {
-                continue;
-            }
-            let delta = x[j] - x[i];
-            let length = delta.length();
-            if length <= f32::EPSILON {
-                continue;
-            }
-            let dir = delta / length;
-            let relative = (self.velocities[j] - self.velocities[i]).dot(dir);
-            let k = damping * h;
-            let impulse = relative * k / (1.0 + k * w_sum);
-            self.velocities[i] += dir * (impulse * self.inv_masses[i]);
-            self.velocities[j] -= dir * (impulse * self.inv_masses[j]);
         }
     }
 
@@ -535,7 +606,7 @@ impl SoftBodyState {
         spheres: &mut [RigidSphereState],
         colliders: &[super::contacts::ColliderInstance],
     ) {
-        self.step_with_contacts_on(h, gravity, spheres, colliders, &super::parallel::Serial);
+        self.step_with_contacts_on(h, gravity, spheres, colliders, &Serial);
     }
 
     /// [`SoftBodyState::step_with_contacts`] with the volume passes' slabs run by `parallel`:
@@ -560,7 +631,7 @@ impl SoftBodyState {
             }
         };
         self.begin_step();
-        self.apply_forces(h, gravity);
+        self.apply_forces_on(h, gravity, parallel);
         for sphere in spheres.iter_mut() {
             sphere.apply_forces(h, gravity);
         }
@@ -576,6 +647,41 @@ impl SoftBodyState {
         }
     }
 }
+
+/// Spring damping, solved implicitly one spring at a time: the damper of each spring
+/// removes the fraction `c h (w_i + w_j) / (1 + c h (w_i + w_j))` of the relative velocity
+/// along it, which is the exact implicit step of that damper alone. An explicit damping
+/// force overshoots on light particles (a grid corner weighs 1/40 of an interior particle)
+/// as soon as the damping is strong enough to matter; this cannot, and it conserves
+/// momentum.
+fn damp_spring(
+    [i, j]: [u32; 2],
+    x: &[Vec3],
+    inv_masses: &[f32],
+    velocities: SharedSlice<Vec3>,
+    h: f32,
+    damping: f32,
+) {
+    let (i, j) = (i as usize, j as usize);
+    let w_sum = inv_masses[i] + inv_masses[j];
+    if w_sum == 0.0 {
+        return;
+    }
+    let delta = x[j] - x[i];
+    let length = delta.length();
+    if length <= f32::EPSILON {
+        return;
+    }
+    let dir = delta / length;
+    let relative = (velocities.get(j) - velocities.get(i)).dot(dir);
+    let k = damping * h;
+    let impulse = relative * k / (1.0 + k * w_sum);
+    velocities.set(i, velocities.get(i) + dir * (impulse * inv_masses[i]));
+    velocities.set(j, velocities.get(j) - dir * (impulse * inv_masses[j]));
+}
+
+/// Particles per job of the per-particle parts of [`SoftBodyState::apply_forces_on`].
+const PARTICLE_CHUNK: usize = 1024;
 
 #[cfg(test)]
 mod tests {

@@ -29,7 +29,7 @@
 //! [`StepCounters`]: super::body::StepCounters
 
 use std::ops::Range;
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::Vec3;
 use wide::{CmpGt, f32x4};
@@ -39,7 +39,7 @@ use super::contacts::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_with_edges};
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
-use super::parallel::{Parallel, Serial, SharedSlice};
+use super::parallel::{Parallel, Serial, SharedSlice, wait_for, wait_until};
 use super::roots::{Cubic, first_crossing, monotone_root};
 use super::tet_mesh::{Csr, TetMesh};
 
@@ -275,25 +275,6 @@ pub(crate) struct ClampMotion {
     /// During a clamp walk, the length of each particle's direction (zero for particles the
     /// impulse does not move), so the walk reads one number per vertex.
     move_len: Vec<f32>,
-}
-
-/// Waits until `flag` is set by another thread.
-fn wait_for(flag: &AtomicBool) {
-    wait_until(|| flag.load(Ordering::Acquire));
-}
-
-/// Waits until `ready` holds, spinning first: blocks take well under a millisecond, less than
-/// a thread takes to be woken.
-fn wait_until(ready: impl Fn() -> bool) {
-    let mut spins = 0u32;
-    while !ready() {
-        if spins < 1 << 14 {
-            std::hint::spin_loop();
-            spins += 1;
-        } else {
-            std::thread::yield_now();
-        }
-    }
 }
 
 /// What one slab's job owns during a pass (see [`super::parallel`]): its working arrays, its

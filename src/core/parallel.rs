@@ -8,7 +8,7 @@
 //! caller passes a [`Parallel`] (the plugin's runs jobs on Bevy's compute task pool).
 
 use std::marker::PhantomData;
-use std::sync::atomic::AtomicBool;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Something that runs independent jobs, possibly on several threads.
 pub trait Parallel: Sync {
@@ -120,5 +120,24 @@ impl std::ops::Deref for SlabFlags {
     type Target = [AtomicBool];
     fn deref(&self) -> &[AtomicBool] {
         &self.0
+    }
+}
+
+/// Waits until `flag` is set by another thread.
+pub(crate) fn wait_for(flag: &AtomicBool) {
+    wait_until(|| flag.load(Ordering::Acquire));
+}
+
+/// Waits until `ready` holds, spinning first: blocks take well under a millisecond, less than
+/// a thread takes to be woken.
+pub(crate) fn wait_until(ready: impl Fn() -> bool) {
+    let mut spins = 0u32;
+    while !ready() {
+        if spins < 1 << 14 {
+            std::hint::spin_loop();
+            spins += 1;
+        } else {
+            std::thread::yield_now();
+        }
     }
 }
