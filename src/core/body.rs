@@ -15,7 +15,6 @@
 //!    ends a step inside one.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::Vec3;
 
@@ -23,7 +22,7 @@ use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients};
 use super::impulses::{ClampMotion, PassWorker};
 use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
-use super::parallel::{Parallel, Serial, SharedSlice, SlabFlags, wait_for, wait_until};
+use super::parallel::{Parallel, Phase, Serial, SharedSlice, SlabFlags, run_phases};
 use super::tet_mesh::TetMesh;
 
 /// A particle index that does not exist in the body's mesh.
@@ -347,9 +346,6 @@ impl SoftBodyState {
         let mesh = &*self.mesh;
         let slabs = mesh.slabs();
         let count = slabs.count();
-        for done in self.slab_done.iter() {
-            done.store(false, Ordering::Relaxed);
-        }
         let k_d = self.material.distance_stiffness;
         let damping = self.material.damping;
         let drag = self.material.linear_damping;
@@ -364,111 +360,86 @@ impl SoftBodyState {
         );
         let forces = SharedSlice::new(&mut self.scratch);
         let velocities = SharedSlice::new(&mut self.velocities);
-        let done = &self.slab_done;
         let n = x.len();
         let chunks = n.div_ceil(PARTICLE_CHUNK);
-        // Tasks: the blocks' forces, the particles' velocities, the blocks' dampers, drag.
+        let (springs_done, dampers_done) = self.slab_done.split_at(count);
         let phases = [
-            count,
-            chunks,
-            if damping > 0.0 { count } else { 0 },
-            if drag > 0.0 { chunks } else { 0 },
+            Phase {
+                tasks: count,
+                order: Some((&slabs.waits_for, springs_done)),
+            },
+            Phase {
+                tasks: chunks,
+                order: None,
+            },
+            Phase {
+                tasks: if damping > 0.0 { count } else { 0 },
+                order: Some((&slabs.waits_for, dampers_done)),
+            },
+            Phase {
+                tasks: if drag > 0.0 { chunks } else { 0 },
+                order: None,
+            },
         ];
-        let phase_done: [AtomicUsize; 4] = std::array::from_fn(|_| AtomicUsize::new(0));
-        let wait_phase = |phase: usize| {
-            wait_until(|| phase_done[phase].load(Ordering::Acquire) >= phases[phase]);
-        };
-        let next = AtomicUsize::new(0);
-        let total: usize = phases.iter().sum();
-        let run = |_thread: usize| {
-            loop {
-                let mut task = next.fetch_add(1, Ordering::Relaxed);
-                if task >= total {
-                    return;
-                }
-                let mut phase = 0;
-                while task >= phases[phase] {
-                    task -= phases[phase];
-                    phase += 1;
-                }
-                let particles = PARTICLE_CHUNK * task..(PARTICLE_CHUNK * (task + 1)).min(n);
-                match phase {
-                    0 => {
-                        for &earlier in slabs.waits_for.row(task) {
-                            wait_for(&done[earlier as usize]);
+        run_phases(parallel, &phases, &|phase, task| {
+            let particles = PARTICLE_CHUNK * task..(PARTICLE_CHUNK * (task + 1)).min(n);
+            match phase {
+                0 => {
+                    for &e in slabs.edges.row(task) {
+                        let e = e as usize;
+                        let [i, j] = mesh.edges()[e].map(|i| i as usize);
+                        let delta = x[j] - x[i];
+                        let length = delta.length();
+                        let rest = spring_rest[e];
+                        if length <= f32::EPSILON * rest {
+                            continue;
                         }
-                        for &e in slabs.edges.row(task) {
-                            let e = e as usize;
-                            let [i, j] = mesh.edges()[e].map(|i| i as usize);
-                            let delta = x[j] - x[i];
-                            let length = delta.length();
-                            let rest = spring_rest[e];
-                            if length <= f32::EPSILON * rest {
-                                continue;
-                            }
-                            let dir = delta / length;
-                            let f = dir * (k_d * (length - rest) / (rest * rest));
-                            forces.set(i, forces.get(i) + f);
-                            forces.set(j, forces.get(j) - f);
-                        }
-                        if let Some(volume_stiffness) = volume_stiffness {
-                            for &t in slabs.tets.row(task) {
-                                let tet = mesh.tets()[t as usize];
-                                let v0 = mesh.rest_volumes()[t as usize];
-                                let p = tet.map(|i| x[i as usize]);
-                                let c = (signed_volume(&p) - v0) / v0;
-                                let g = volume_gradients(&p);
-                                let scale = -volume_stiffness * c / v0;
-                                for k in 0..4 {
-                                    let i = tet[k] as usize;
-                                    forces.set(i, forces.get(i) + g[k] * scale);
-                                }
-                            }
-                        }
-                        done[task].store(true, Ordering::Release);
+                        let dir = delta / length;
+                        let f = dir * (k_d * (length - rest) / (rest * rest));
+                        forces.set(i, forces.get(i) + f);
+                        forces.set(j, forces.get(j) - f);
                     }
-                    1 => {
-                        wait_phase(0);
-                        for i in particles {
-                            let w = inv_masses[i];
-                            if w > 0.0 {
-                                velocities
-                                    .set(i, velocities.get(i) + h * (gravity + forces.get(i) * w));
-                            }
-                            forces.set(i, Vec3::ZERO);
-                        }
-                    }
-                    2 => {
-                        wait_phase(1);
-                        for &earlier in slabs.waits_for.row(task) {
-                            wait_for(&done[count + earlier as usize]);
-                        }
-                        for &e in slabs.edges.row(task) {
-                            damp_spring(
-                                mesh.edges()[e as usize],
-                                x,
-                                inv_masses,
-                                velocities,
-                                h,
-                                damping,
-                            );
-                        }
-                        done[count + task].store(true, Ordering::Release);
-                    }
-                    _ => {
-                        wait_phase(2);
-                        let keep = 1.0 / (1.0 + h * drag);
-                        for i in particles {
-                            if inv_masses[i] > 0.0 {
-                                velocities.set(i, velocities.get(i) * keep);
+                    if let Some(volume_stiffness) = volume_stiffness {
+                        for &t in slabs.tets.row(task) {
+                            let tet = mesh.tets()[t as usize];
+                            let v0 = mesh.rest_volumes()[t as usize];
+                            let p = tet.map(|i| x[i as usize]);
+                            let c = (signed_volume(&p) - v0) / v0;
+                            let g = volume_gradients(&p);
+                            let scale = -volume_stiffness * c / v0;
+                            for k in 0..4 {
+                                let i = tet[k] as usize;
+                                forces.set(i, forces.get(i) + g[k] * scale);
                             }
                         }
                     }
                 }
-                phase_done[phase].fetch_add(1, Ordering::Release);
+                1 => {
+                    for i in particles {
+                        let w = inv_masses[i];
+                        if w > 0.0 {
+                            let dv = h * (gravity + forces.get(i) * w);
+                            velocities.set(i, velocities.get(i) + dv);
+                        }
+                        forces.set(i, Vec3::ZERO);
+                    }
+                }
+                2 => {
+                    for &e in slabs.edges.row(task) {
+                        let edge = mesh.edges()[e as usize];
+                        damp_spring(edge, x, inv_masses, velocities, h, damping);
+                    }
+                }
+                _ => {
+                    let keep = 1.0 / (1.0 + h * drag);
+                    for i in particles {
+                        if inv_masses[i] > 0.0 {
+                            velocities.set(i, velocities.get(i) * keep);
+                        }
+                    }
+                }
             }
-        };
-        parallel.run(parallel.threads().clamp(1, count.max(1)), &run);
+        });
         for &(i, target) in &self.kinematic {
             let i = i as usize;
             self.velocities[i] = (target - self.positions[i]) / h;

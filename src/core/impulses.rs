@@ -29,7 +29,6 @@
 //! [`StepCounters`]: super::body::StepCounters
 
 use std::ops::Range;
-use std::sync::atomic::{AtomicUsize, Ordering};
 
 use glam::Vec3;
 use wide::{CmpGt, f32x4};
@@ -39,7 +38,7 @@ use super::contacts::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_with_edges};
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
-use super::parallel::{Parallel, Serial, SharedSlice, wait_for, wait_until};
+use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
 use super::roots::{Cubic, first_crossing, monotone_root};
 use super::tet_mesh::{Csr, TetMesh};
 
@@ -526,9 +525,6 @@ impl SoftBodyState {
             worker.sphere_dv.clear();
             worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
         }
-        for done in self.slab_done.iter() {
-            done.store(false, Ordering::Relaxed);
-        }
         let clamp_regions = clamp_regions.filter(|_| !self.clamp_bounds.disabled);
         if let Some(regions) = clamp_regions {
             self.clamp_bounds
@@ -547,14 +543,11 @@ impl SoftBodyState {
             let drift = SharedSlice::new(&mut self.clamp_motion.drift);
             let move_len = SharedSlice::new(&mut self.clamp_motion.move_len);
             let workers = SharedSlice::new(&mut self.pass_workers);
-            let done = &self.slab_done;
             let waits_for = &mesh.slabs().waits_for;
             let count = slabs.len();
-            let next = AtomicUsize::new(0);
-            // The clamp bounds are computed by the first tasks, in chunks: the tets', then
-            // the vertices' (which need all tets'), then the regions' (which need all
-            // vertices'); threads that join late (waking one takes longer than a chunk) find
-            // the work already going. The blocks wait for all of it.
+            // The clamp bounds are computed first, in chunks: the tets', then the vertices'
+            // (which need all tets'), then the regions' (which need all vertices'); threads
+            // that join late (waking one takes longer than a chunk) find the work going.
             let (n, tet_count) = (mesh.vertex_count(), mesh.tet_count());
             let region_count = match clamp_regions {
                 Some(ClampRegions::Rings) => n,
@@ -565,88 +558,62 @@ impl SoftBodyState {
                 Some(_) => items.div_ceil(BOUNDS_CHUNK),
                 None => 0,
             };
-            let phases = [chunks(tet_count), chunks(n), chunks(region_count)];
-            let phase_done = [
-                AtomicUsize::new(0),
-                AtomicUsize::new(0),
-                AtomicUsize::new(0),
+            let chunk_phase = |items: usize| Phase {
+                tasks: chunks(items),
+                order: None,
+            };
+            let phases = [
+                chunk_phase(tet_count),
+                chunk_phase(n),
+                chunk_phase(region_count),
+                Phase {
+                    tasks: count,
+                    order: Some((waits_for, &self.slab_done[..count])),
+                },
             ];
-            let first = phases.iter().sum::<usize>();
-            let wait_phase = |phase: usize| {
-                if phase_done[phase].load(Ordering::Acquire) < phases[phase] {
-                    wait_until(|| phase_done[phase].load(Ordering::Acquire) >= phases[phase]);
-                }
-            };
-            let run = |_thread: usize| {
-                loop {
-                    let task = next.fetch_add(1, Ordering::Relaxed);
-                    if task < first {
-                        let (phase, chunk) = if task < phases[0] {
-                            (0, task)
-                        } else if task < phases[0] + phases[1] {
-                            (1, task - phases[0])
-                        } else {
-                            (2, task - phases[0] - phases[1])
+            run_phases(parallel, &phases, &|phase, task| {
+                let range =
+                    |items: usize| BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(items);
+                match (phase, clamp_regions) {
+                    (0, _) => bounds.compute_tets(mesh, previews, range(tet_count)),
+                    (1, _) => bounds.compute_vertices(mesh, previews, drift, range(n)),
+                    (2, Some(regions)) => {
+                        bounds.compute_regions(mesh, regions, range(region_count))
+                    }
+                    _ => {
+                        let view = PassView {
+                            mesh,
+                            h,
+                            inv_masses,
+                            contact_normals,
+                            contact_kept,
+                            contact_sphere,
+                            any_touching,
+                            bounds,
+                            velocities,
+                            previews,
+                            scratch,
+                            drift,
+                            move_len,
                         };
-                        let range = |items: usize| {
-                            BOUNDS_CHUNK * chunk..(BOUNDS_CHUNK * (chunk + 1)).min(items)
-                        };
-                        match phase {
-                            0 => bounds.compute_tets(mesh, previews, range(tet_count)),
-                            1 => {
-                                wait_phase(0);
-                                bounds.compute_vertices(mesh, previews, drift, range(n));
-                            }
-                            _ => {
-                                wait_phase(1);
-                                if let Some(regions) = clamp_regions {
-                                    bounds.compute_regions(mesh, regions, range(region_count));
-                                }
-                            }
+                        // The particles this task reads were last moved by the tasks it
+                        // waits for (done by now): their largest drift bounds those
+                        // particles' drift.
+                        let mut start_drift = 0.0f32;
+                        for &earlier in waits_for.row(task) {
+                            // Safety: that task is done; nothing writes its worker now.
+                            let moved = unsafe { workers.get_mut(earlier as usize) }.max_moved;
+                            start_drift = larger(start_drift, moved);
                         }
-                        phase_done[phase].fetch_add(1, Ordering::Release);
-                        continue;
+                        // Safety: each task is run by one thread only.
+                        let worker = unsafe { workers.get_mut(task) };
+                        worker.max_moved = start_drift;
+                        for &item in slabs.row(task) {
+                            impulse(&view, worker, item);
+                        }
                     }
-                    let task = task - first;
-                    if task >= count {
-                        return;
-                    }
-                    wait_phase(2);
-                    let view = PassView {
-                        mesh,
-                        h,
-                        inv_masses,
-                        contact_normals,
-                        contact_kept,
-                        contact_sphere,
-                        any_touching,
-                        bounds,
-                        velocities,
-                        previews,
-                        scratch,
-                        drift,
-                        move_len,
-                    };
-                    // The particles this task reads were last moved by the tasks it waits for:
-                    // their largest drift bounds those particles' drift.
-                    let mut start_drift = 0.0f32;
-                    for &earlier in waits_for.row(task) {
-                        let earlier = earlier as usize;
-                        wait_for(&done[earlier]);
-                        // Safety: that task is done; nothing writes its worker now.
-                        let moved = unsafe { workers.get_mut(earlier) }.max_moved;
-                        start_drift = larger(start_drift, moved);
-                    }
-                    // Safety: each task is taken by one thread only.
-                    let worker = unsafe { workers.get_mut(task) };
-                    worker.max_moved = start_drift;
-                    for &item in slabs.row(task) {
-                        impulse(&view, worker, item);
-                    }
-                    done[task].store(true, Ordering::Release);
                 }
-            };
-            parallel.run(parallel.threads().clamp(1, count.max(1)), &run);
+            });
         }
         let c = &mut self.counters;
         for worker in &self.pass_workers {

@@ -141,3 +141,118 @@ pub(crate) fn wait_until(ready: impl Fn() -> bool) {
         }
     }
 }
+
+/// One phase of [`run_phases`].
+pub(crate) struct Phase<'a> {
+    /// Its number of tasks.
+    pub(crate) tasks: usize,
+    /// For a phase over the mesh's blocks: each task's earlier tasks in the phase, which it
+    /// waits for ([`Slabs::waits_for`](super::tet_mesh::Slabs)), and one flag per task.
+    pub(crate) order: Option<(&'a super::tet_mesh::Csr, &'a [AtomicBool])>,
+}
+
+/// Runs `job(phase, task)` for every task of every phase on the threads of `parallel`, with
+/// the result of running them one after another: a task starts once every task of the earlier
+/// phases is done and, in an ordered phase, the tasks it waits for. Threads take tasks in order
+/// as they come free and only ever wait for tasks that running threads have taken, so any
+/// number of threads, one included, finishes.
+pub(crate) fn run_phases(
+    parallel: &dyn Parallel,
+    phases: &[Phase],
+    job: &(dyn Fn(usize, usize) + Sync),
+) {
+    for phase in phases {
+        if let Some((_, done)) = phase.order {
+            for flag in &done[..phase.tasks] {
+                flag.store(false, Ordering::Relaxed);
+            }
+        }
+    }
+    let total: usize = phases.iter().map(|p| p.tasks).sum();
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    // Tasks finished, all phases together. No task of a phase finishes before every task of
+    // the phases before it, so this reaching the number of tasks before a phase means that
+    // all of those are done.
+    let finished = std::sync::atomic::AtomicUsize::new(0);
+    let run = |_thread: usize| {
+        loop {
+            let mut task = next.fetch_add(1, Ordering::Relaxed);
+            if task >= total {
+                return;
+            }
+            let (mut phase, mut before) = (0, 0);
+            while task >= phases[phase].tasks {
+                task -= phases[phase].tasks;
+                before += phases[phase].tasks;
+                phase += 1;
+            }
+            if finished.load(Ordering::Acquire) < before {
+                wait_until(|| finished.load(Ordering::Acquire) >= before);
+            }
+            if let Some((waits_for, done)) = phases[phase].order {
+                for &earlier in waits_for.row(task) {
+                    wait_for(&done[earlier as usize]);
+                }
+                job(phase, task);
+                done[task].store(true, Ordering::Release);
+            } else {
+                job(phase, task);
+            }
+            finished.fetch_add(1, Ordering::Release);
+        }
+    };
+    parallel.run(parallel.threads().clamp(1, total.max(1)), &run);
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Runs each job on its own thread.
+    struct Threads;
+
+    impl Parallel for Threads {
+        fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync)) {
+            std::thread::scope(|scope| {
+                for i in 0..jobs {
+                    scope.spawn(move || job(i));
+                }
+            });
+        }
+
+        fn threads(&self) -> usize {
+            4
+        }
+    }
+
+    #[test]
+    fn a_phase_starts_after_every_earlier_phase_even_past_an_empty_one() {
+        for parallel in [&Threads as &dyn Parallel, &Serial] {
+            let written: Vec<AtomicBool> = (0..8).map(|_| AtomicBool::new(false)).collect();
+            let early = std::sync::atomic::AtomicUsize::new(0);
+            let phases = [
+                Phase {
+                    tasks: 8,
+                    order: None,
+                },
+                Phase {
+                    tasks: 0,
+                    order: None,
+                },
+                Phase {
+                    tasks: 8,
+                    order: None,
+                },
+            ];
+            run_phases(parallel, &phases, &|phase, task| {
+                if phase == 0 {
+                    std::thread::sleep(std::time::Duration::from_millis(2 * task as u64));
+                    written[task].store(true, Ordering::Release);
+                } else if written.iter().any(|w| !w.load(Ordering::Acquire)) {
+                    early.fetch_add(1, Ordering::Relaxed);
+                }
+            });
+            assert_eq!(early.load(Ordering::Relaxed), 0);
+        }
+    }
+}
