@@ -1,11 +1,11 @@
-//! Running the jobs of one pass on several threads without changing its result.
+//! Running the jobs of one stage on several threads without changing its result.
 //!
 //! The volume passes are Gauss-Seidel sweeps: each impulse sees the ones before it. They run in
-//! the order of the mesh's [`Slabs`](super::tet_mesh::Slabs): first every even slab, then every
-//! odd slab, each slab's items in index order. Slabs of one parity never touch what another of
-//! that parity writes, so they may run at the same time, and the result is the same bit for
-//! bit whether they run on one thread or many, in any order. The core spawns no threads: the
-//! caller passes a [`Parallel`] (the plugin's runs jobs on Bevy's compute task pool).
+//! the blocks of the mesh's [`Slabs`](super::tet_mesh::Slabs), in the blocks' order, each
+//! block's items in index order; a block waits only for the earlier blocks it shares particles
+//! with, so blocks that share none run at the same time, and the result is the same bit for bit
+//! on one thread or many (`run_phases`). The core spawns no threads: the caller passes a
+//! [`Parallel`] (the plugin's runs jobs on Bevy's compute task pool).
 
 use std::marker::PhantomData;
 use std::sync::atomic::{AtomicBool, Ordering};
