@@ -72,7 +72,8 @@ pub enum ImpulseOutcome {
 /// when `drift_bound(drift + m, region_grad, region_reach)` is below `region_slack`, the smallest slack
 /// above the floor in the region at the start of the pass; then the clamp's answer is known (no
 /// shortening) and its walk over the neighbours is skipped. `drift` is first the largest drift
-/// seen in the whole pass (free to check); if that is not enough, the region is checked one
+/// any particle the impulse's block can reach has had in the pass (`PassWorker::max_moved`,
+/// free to check); if that is not enough, the region is checked one
 /// impulse vertex at a time, each vertex's one-ring against its own slack and reach with the
 /// largest drift among its ring vertices; and in a walk, each tet against its own bounds with
 /// the drift of its own four particles. A tet already below `eps` at the start gets as slack half of
@@ -276,15 +277,16 @@ pub(crate) struct ClampMotion {
     move_len: Vec<f32>,
 }
 
-/// What one slab's job owns during a pass (see [`super::parallel`]): its working arrays, its
+/// What one block's task owns during a pass (see [`super::parallel`]): its working arrays, its
 /// counters, and the velocity changes it gives the spheres, added to them after the pass in
-/// slab order so that the sum does not depend on which job finished first.
+/// block order so that the sum does not depend on which task finished first.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct PassWorker {
     ring_work: RingWork,
     counters: StepCounters,
-    /// The largest drift of any particle this job could have seen moved: the largest of all
-    /// jobs at the start of its phase, then its own moves (drifts can shrink again; this cannot).
+    /// The largest drift of any particle this task reads: the largest of the tasks it waited
+    /// for (the only ones that moved those particles before it), then its own moves (drifts can
+    /// shrink again; this cannot).
     max_moved: f32,
     sphere_dv: Vec<Vec3>,
 }
@@ -461,7 +463,6 @@ impl SoftBodyState {
                 );
             },
         );
-        self.clamp_bounds.active = false;
     }
 
     /// Stage 4: one impulse per tet towards its own rest volume, scaled by `gamma` (section 4,
@@ -498,7 +499,6 @@ impl SoftBodyState {
                 view.tet_impulse(worker, t as usize, &settings);
             },
         );
-        self.clamp_bounds.active = false;
     }
 
     /// Runs `impulse` on every item of every task of the mesh's [`Slabs`] (`items` picks the
@@ -615,6 +615,7 @@ impl SoftBodyState {
                 }
             });
         }
+        self.clamp_bounds.active = false;
         let c = &mut self.counters;
         for worker in &self.pass_workers {
             let w = &worker.counters;
