@@ -3,6 +3,7 @@
 
 use std::time::Duration;
 
+use bevy::ecs::batching::BatchingStrategy;
 use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
 use bevy::platform::time::Instant;
 use bevy::prelude::*;
@@ -352,6 +353,13 @@ fn pass_parallelism(few_bodies: bool, body: &SoftBodyState) -> &'static dyn Para
     }
 }
 
+/// One body per task of a parallel query. Bevy's default splits the bodies into one batch per
+/// thread, which assumes they cost the same; a body resting on the ground costs about twice
+/// what a falling one does, and 16 bodies dropped one after another left one of two threads
+/// waiting for the other (two threads 1.2x faster than one in the `bench` example's
+/// `bodies_16`). A body's stage is long enough (tens of microseconds) for a task each.
+const ONE_BODY_PER_TASK: BatchingStrategy = BatchingStrategy::fixed(1);
+
 /// Whether there are fewer bodies than compute threads.
 fn few_bodies(bodies: &Query<(&mut SoftBody, &mut SoftBodyStats)>) -> bool {
     let threads = bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num());
@@ -373,7 +381,10 @@ fn par_bodies(
     if bodies.iter().len() == 1 {
         bodies.iter_mut().for_each(run);
     } else {
-        bodies.par_iter_mut().for_each(run);
+        bodies
+            .par_iter_mut()
+            .batching_strategy(ONE_BODY_PER_TASK)
+            .for_each(run);
     }
 }
 
@@ -381,12 +392,14 @@ fn par_bodies(
 /// before the stage, then gives each sphere the changes of its velocity that the bodies made, in
 /// query order (the first body's result as it is, the others' as differences). Every body sees
 /// the same spheres whatever ran before it, so the result does not depend on the number of
-/// threads; with one body it is exactly the serial result. Returns nothing: contacts go to the
+/// threads; with one body it is exactly the serial result. `pass` adds its contacts to the
 /// stats.
 fn par_with_spheres(
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
     solver: &mut SolverSpheres,
-    pass: impl Fn(&mut SoftBodyState, &mut [RigidSphereState], &[ColliderInstance]) -> u32 + Send + Sync,
+    pass: impl Fn(&mut SoftBodyState, &mut SoftBodyStats, &mut [RigidSphereState], &[ColliderInstance])
+    + Send
+    + Sync,
 ) {
     solver.before.clear();
     solver.before.extend_from_slice(&solver.states);
@@ -396,13 +409,16 @@ fn par_with_spheres(
         let start = Instant::now();
         body.spheres.clear();
         body.spheres.extend_from_slice(before);
-        stats.contacts += pass(&mut body.state, &mut body.spheres, colliders);
+        pass(&mut body.state, &mut stats, &mut body.spheres, colliders);
         body.step_time += start.elapsed();
     };
     if bodies.iter().len() == 1 {
         bodies.iter_mut().for_each(run);
     } else {
-        bodies.par_iter_mut().for_each(run);
+        bodies
+            .par_iter_mut()
+            .batching_strategy(ONE_BODY_PER_TASK)
+            .for_each(run);
     }
     if solver.states.is_empty() {
         return;
@@ -460,20 +476,24 @@ fn apply_forces(
 
 /// One contact pass over everything: spheres against static colliders, then particles against
 /// spheres, then particles against static colliders (last, so that no particle is left inside
-/// the ground by a sphere pushing it). XPBD bodies resolve their contacts in their substeps.
+/// the ground by a sphere pushing it), then `after` on each body in the same task (one parallel
+/// section instead of two: waking a thread for each costs more than a small body's stage).
+/// XPBD bodies resolve their contacts in their substeps.
 fn contact_pass(
     h: f32,
     solver: &mut SolverSpheres,
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    after: impl Fn(&mut SoftBodyState, &mut SoftBodyStats) + Send + Sync,
 ) {
     for sphere in solver.states.iter_mut() {
         sphere.resolve_static_contacts(h, &solver.colliders);
     }
-    par_with_spheres(bodies, solver, |s, spheres, colliders| {
-        if s.material().method.is_xpbd() {
-            return 0;
+    par_with_spheres(bodies, solver, |s, stats, spheres, colliders| {
+        if !s.material().method.is_xpbd() {
+            stats.contacts +=
+                s.resolve_sphere_contacts(h, spheres) + s.resolve_static_contacts(h, colliders);
         }
-        s.resolve_sphere_contacts(h, spheres) + s.resolve_static_contacts(h, colliders)
+        after(s, stats);
     });
 }
 
@@ -491,7 +511,7 @@ fn resolve_contacts(
     for (_, mut stats) in &mut bodies {
         stats.contacts = 0;
     }
-    contact_pass(h, &mut solver, &mut bodies);
+    contact_pass(h, &mut solver, &mut bodies, |_, _| {});
     clock.current += start.elapsed();
 }
 
@@ -507,10 +527,9 @@ fn one_ring(
     }
     let start = Instant::now();
     let few = few_bodies(&bodies);
-    par_with_spheres(&mut bodies, &mut solver, |s, spheres, colliders| {
-        let contacts = s.xpbd_pass(h, spheres, colliders);
+    par_with_spheres(&mut bodies, &mut solver, |s, stats, spheres, colliders| {
+        stats.contacts += s.xpbd_pass(h, spheres, colliders);
         s.one_ring_pass_on(h, spheres, pass_parallelism(few, s));
-        contacts
     });
     clock.current += start.elapsed();
 }
@@ -527,9 +546,8 @@ fn per_tet(
     }
     let start = Instant::now();
     let few = few_bodies(&bodies);
-    par_with_spheres(&mut bodies, &mut solver, |s, spheres, _| {
+    par_with_spheres(&mut bodies, &mut solver, |s, _, spheres, _| {
         s.per_tet_pass_on(h, spheres, pass_parallelism(few, s));
-        0
     });
     clock.current += start.elapsed();
 }
@@ -541,6 +559,13 @@ fn plasticity(
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
+        return;
+    }
+    // Without plastic bodies, not even a parallel section (waking threads for nothing).
+    if bodies
+        .iter()
+        .all(|(body, _)| body.state.material().plasticity.is_none())
+    {
         return;
     }
     let start = Instant::now();
@@ -561,8 +586,7 @@ fn integrate(
     }
     let start = Instant::now();
     let solver_spheres = &mut *solver_spheres;
-    contact_pass(h, solver_spheres, &mut bodies);
-    par_bodies(&mut bodies, |s, stats| {
+    contact_pass(h, solver_spheres, &mut bodies, |s, stats| {
         s.integrate_positions(h);
         stats.steps += 1;
     });
@@ -587,6 +611,7 @@ fn integrate(
 fn writeback(mut bodies: Query<(&SoftBody, &mut SoftBodyStats, &mut Transform)>) {
     bodies
         .par_iter_mut()
+        .batching_strategy(ONE_BODY_PER_TASK)
         .for_each(|(body, mut stats, mut transform)| {
             if !body.placed {
                 return;
