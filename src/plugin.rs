@@ -312,7 +312,7 @@ fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState
     }
 }
 
-/// Runs the independent jobs of a volume pass (its slabs, see `core::parallel`) on Bevy's
+/// Runs the independent jobs of a volume pass (its blocks, see `core::parallel`) on Bevy's
 /// compute task pool.
 struct ComputePool;
 

@@ -36,7 +36,7 @@ fn simulate(threads: usize, one_body: bool) -> Vec<u32> {
     if one_body {
         let mesh = box_grid(UVec3::splat(12), Vec3::splat(0.05), Vec3::ZERO).unwrap();
         // Enough blocks for every thread.
-        assert!(mesh.slabs().count() >= 16, "{}", mesh.slabs().count());
+        assert!(mesh.blocks().count() >= 16, "{}", mesh.blocks().count());
         let material = SoftBodyMaterial {
             distance_stiffness: 0.2,
             ..Default::default()

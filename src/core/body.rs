@@ -22,7 +22,7 @@ use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients};
 use super::impulses::{ClampMotion, PassWorker};
 use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
-use super::parallel::{Parallel, Phase, Serial, SharedSlice, SlabFlags, run_phases};
+use super::parallel::{BlockFlags, Parallel, Phase, Serial, SharedSlice, run_phases};
 use super::tet_mesh::TetMesh;
 
 /// A particle index that does not exist in the body's mesh.
@@ -111,10 +111,10 @@ pub struct SoftBodyState {
     pub(crate) touching: Vec<u32>,
     /// What the clamp bounds track per particle while a volume pass runs.
     pub(crate) clamp_motion: ClampMotion,
-    /// One per slab of the mesh: what each job of a volume pass owns.
+    /// One per block of the mesh: what each job of a volume pass owns.
     pub(crate) pass_workers: Vec<PassWorker>,
-    /// One per slab: whether its job in the running pass is done.
-    pub(crate) slab_done: SlabFlags,
+    /// One per block and phase: whether its job in the running pass is done.
+    pub(crate) block_done: BlockFlags,
     pub(crate) counters: StepCounters,
     /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
     pub(crate) gravity: Vec3,
@@ -152,8 +152,8 @@ impl SoftBodyState {
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::with_capacity(n),
             clamp_motion: ClampMotion::default(),
-            pass_workers: vec![PassWorker::for_mesh(&mesh); mesh.slabs().count()],
-            slab_done: SlabFlags::new(2 * mesh.slabs().count()),
+            pass_workers: vec![PassWorker::for_mesh(&mesh); mesh.blocks().count()],
+            block_done: BlockFlags::new(2 * mesh.blocks().count()),
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
             sphere_positions: Vec::new(),
@@ -344,8 +344,8 @@ impl SoftBodyState {
             return;
         }
         let mesh = &*self.mesh;
-        let slabs = mesh.slabs();
-        let count = slabs.count();
+        let blocks = mesh.blocks();
+        let count = blocks.count();
         let k_d = self.material.distance_stiffness;
         let damping = self.material.damping;
         let drag = self.material.linear_damping;
@@ -362,11 +362,11 @@ impl SoftBodyState {
         let velocities = SharedSlice::new(&mut self.velocities);
         let n = x.len();
         let chunks = n.div_ceil(PARTICLE_CHUNK);
-        let (springs_done, dampers_done) = self.slab_done.split_at(count);
+        let (springs_done, dampers_done) = self.block_done.split_at(count);
         let phases = [
             Phase {
                 tasks: count,
-                order: Some((&slabs.waits_for, springs_done)),
+                order: Some((&blocks.waits_for, springs_done)),
             },
             Phase {
                 tasks: chunks,
@@ -374,7 +374,7 @@ impl SoftBodyState {
             },
             Phase {
                 tasks: if damping > 0.0 { count } else { 0 },
-                order: Some((&slabs.waits_for, dampers_done)),
+                order: Some((&blocks.waits_for, dampers_done)),
             },
             Phase {
                 tasks: if drag > 0.0 { chunks } else { 0 },
@@ -385,7 +385,7 @@ impl SoftBodyState {
             let particles = PARTICLE_CHUNK * task..(PARTICLE_CHUNK * (task + 1)).min(n);
             match phase {
                 0 => {
-                    for &e in slabs.edges.row(task) {
+                    for &e in blocks.edges.row(task) {
                         let e = e as usize;
                         let [i, j] = mesh.edges()[e].map(|i| i as usize);
                         let delta = x[j] - x[i];
@@ -400,7 +400,7 @@ impl SoftBodyState {
                         forces.set(j, forces.get(j) - f);
                     }
                     if let Some(volume_stiffness) = volume_stiffness {
-                        for &t in slabs.tets.row(task) {
+                        for &t in blocks.tets.row(task) {
                             let tet = mesh.tets()[t as usize];
                             let v0 = mesh.rest_volumes()[t as usize];
                             let p = tet.map(|i| x[i as usize]);
@@ -425,7 +425,7 @@ impl SoftBodyState {
                     }
                 }
                 2 => {
-                    for &e in slabs.edges.row(task) {
+                    for &e in blocks.edges.row(task) {
                         let edge = mesh.edges()[e as usize];
                         damp_spring(edge, x, inv_masses, velocities, h, damping);
                     }
@@ -580,7 +580,7 @@ impl SoftBodyState {
         self.step_with_contacts_on(h, gravity, spheres, colliders, &Serial);
     }
 
-    /// [`SoftBodyState::step_with_contacts`] with the volume passes' slabs run by `parallel`:
+    /// [`SoftBodyState::step_with_contacts`] with the volume passes' blocks run by `parallel`:
     /// the same result bit for bit on any number of threads.
     pub fn step_with_contacts_on(
         &mut self,

@@ -450,7 +450,7 @@ impl SoftBodyState {
         self.one_ring_pass_on(h, spheres, &Serial);
     }
 
-    /// [`SoftBodyState::one_ring_pass`] with the mesh's slabs run by `parallel`: the same
+    /// [`SoftBodyState::one_ring_pass`] with the mesh's blocks run by `parallel`: the same
     /// result bit for bit on any number of threads (see [`super::parallel`]).
     pub fn one_ring_pass_on(
         &mut self,
@@ -467,12 +467,12 @@ impl SoftBodyState {
         self.refresh_previews(h);
         let regions = settings.neighbour_clamp.then_some(ClampRegions::Rings);
         let mesh = self.mesh.clone();
-        self.run_slabs(
+        self.run_blocks(
             h,
             spheres,
             parallel,
             regions,
-            &mesh.slabs().vertices,
+            &mesh.blocks().vertices,
             &|view, worker, p| {
                 view.ring_impulse(
                     worker,
@@ -491,7 +491,7 @@ impl SoftBodyState {
         self.per_tet_pass_on(h, spheres, &Serial);
     }
 
-    /// [`SoftBodyState::per_tet_pass`] with the mesh's slabs run by `parallel`, as
+    /// [`SoftBodyState::per_tet_pass`] with the mesh's blocks run by `parallel`, as
     /// [`SoftBodyState::one_ring_pass_on`].
     pub fn per_tet_pass_on(
         &mut self,
@@ -508,19 +508,19 @@ impl SoftBodyState {
         self.refresh_previews(h);
         let regions = settings.neighbour_clamp.then_some(ClampRegions::Tets);
         let mesh = self.mesh.clone();
-        self.run_slabs(
+        self.run_blocks(
             h,
             spheres,
             parallel,
             regions,
-            &mesh.slabs().tets,
+            &mesh.blocks().tets,
             &|view, worker, t| {
                 view.tet_impulse(worker, t as usize, &settings);
             },
         );
     }
 
-    /// Runs `impulse` on every item of every task of the mesh's [`Slabs`] (`items` picks the
+    /// Runs `impulse` on every item of every task of the mesh's [`Blocks`] (`items` picks the
     /// vertices or the tets), each task's items in order, with the result of running the tasks
     /// one after another (see [`super::parallel`]): the threads of `parallel` take tasks in
     /// order as they come free, each waiting for the earlier tasks it shares particles with. A
@@ -528,14 +528,14 @@ impl SoftBodyState {
     /// threads, one included, finishes. Then adds up the tasks' counters and sphere velocity
     /// changes in task order.
     ///
-    /// [`Slabs`]: super::tet_mesh::Slabs
-    fn run_slabs(
+    /// [`Blocks`]: super::tet_mesh::Blocks
+    fn run_blocks(
         &mut self,
         h: f32,
         spheres: &mut [RigidSphereState],
         parallel: &dyn Parallel,
         clamp_regions: Option<ClampRegions>,
-        slabs: &Csr,
+        items: &Csr,
         impulse: &(dyn Fn(&PassView, &mut PassWorker, u32) + Sync),
     ) {
         for worker in &mut self.pass_workers {
@@ -563,8 +563,8 @@ impl SoftBodyState {
             let move_len = SharedSlice::new(&mut self.clamp_motion.move_len);
             let unclear_rank = SharedSlice::new(&mut self.clamp_motion.unclear_rank);
             let workers = SharedSlice::new(&mut self.pass_workers);
-            let waits_for = &mesh.slabs().waits_for;
-            let count = slabs.len();
+            let waits_for = &mesh.blocks().waits_for;
+            let count = items.len();
             // The clamp bounds are computed first, in chunks: the tets', then the vertices'
             // (which need all tets'), then the regions' (which need all vertices'); threads
             // that join late (waking one takes longer than a chunk) find the work going.
@@ -588,7 +588,7 @@ impl SoftBodyState {
                 chunk_phase(region_count),
                 Phase {
                     tasks: count,
-                    order: Some((waits_for, &self.slab_done[..count])),
+                    order: Some((waits_for, &self.block_done[..count])),
                 },
             ];
             run_phases(parallel, &phases, &|phase, task| {
@@ -629,7 +629,7 @@ impl SoftBodyState {
                         // Safety: each task is run by one thread only.
                         let worker = unsafe { workers.get_mut(task) };
                         worker.max_moved = start_drift;
-                        for &item in slabs.row(task) {
+                        for &item in items.row(task) {
                             impulse(&view, worker, item);
                         }
                     }

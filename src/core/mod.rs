@@ -30,7 +30,7 @@ pub use material::{
 pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
-pub use tet_mesh::{Slabs, TetMesh, TetMeshError};
+pub use tet_mesh::{Blocks, TetMesh, TetMeshError};
 pub use tetgen::{TetGenError, TetGenFile, parse_tetgen, write_tetgen};
 pub use tetrahedralize::{
     Resolution, Tetrahedralization, TetrahedralizeError, face_components, tetrahedralize,

@@ -1,7 +1,7 @@
 //! Running the jobs of one stage on several threads without changing its result.
 //!
 //! The volume passes are Gauss-Seidel sweeps: each impulse sees the ones before it. They run in
-//! the blocks of the mesh's [`Slabs`](super::tet_mesh::Slabs), in the blocks' order, each
+//! the blocks of the mesh's [`Blocks`](super::tet_mesh::Blocks), in the blocks' order, each
 //! block's items in index order; a block waits only for the earlier blocks it shares particles
 //! with, so blocks that share none run at the same time, and the result is the same bit for bit
 //! on one thread or many (`run_phases`). The core spawns no threads: the caller passes a
@@ -38,7 +38,7 @@ impl Parallel for Serial {
 
 /// A slice that jobs running at the same time may write, each at indices no other running job
 /// reads or writes. Bounds are checked; that no two jobs touch the same element is the caller's
-/// promise, kept by the slabs (see [`Slabs`](super::tet_mesh::Slabs) and its test).
+/// promise, kept by the blocks (see [`Blocks`](super::tet_mesh::Blocks) and its test).
 pub(crate) struct SharedSlice<'a, T> {
     ptr: *mut T,
     len: usize,
@@ -85,7 +85,7 @@ impl<T: Copy> SharedSlice<'_, T> {
     #[inline(always)]
     pub(crate) fn get(&self, i: usize) -> T {
         assert!(i < self.len);
-        // Safety: in bounds; no other job writes element `i` now (the slabs' promise).
+        // Safety: in bounds; no other job writes element `i` now (the blocks' promise).
         unsafe { *self.ptr.add(i) }
     }
 
@@ -93,30 +93,30 @@ impl<T: Copy> SharedSlice<'_, T> {
     #[inline(always)]
     pub(crate) fn set(&self, i: usize, value: T) {
         assert!(i < self.len);
-        // Safety: in bounds; no other job reads or writes element `i` now (the slabs' promise).
+        // Safety: in bounds; no other job reads or writes element `i` now (the blocks' promise).
         unsafe { *self.ptr.add(i) = value }
     }
 }
 
-/// One flag per slab: whether its job in the running pass is done. A clone has its own flags
+/// One flag per block: whether its job in the running pass is done. A clone has its own flags
 /// (all clear), so clones of a body can step at the same time.
 #[derive(Debug, Default)]
-pub(crate) struct SlabFlags(Box<[AtomicBool]>);
+pub(crate) struct BlockFlags(Box<[AtomicBool]>);
 
-impl SlabFlags {
+impl BlockFlags {
     /// `count` clear flags.
-    pub(crate) fn new(count: usize) -> SlabFlags {
-        SlabFlags((0..count).map(|_| AtomicBool::new(false)).collect())
+    pub(crate) fn new(count: usize) -> BlockFlags {
+        BlockFlags((0..count).map(|_| AtomicBool::new(false)).collect())
     }
 }
 
-impl Clone for SlabFlags {
-    fn clone(&self) -> SlabFlags {
-        SlabFlags::new(self.0.len())
+impl Clone for BlockFlags {
+    fn clone(&self) -> BlockFlags {
+        BlockFlags::new(self.0.len())
     }
 }
 
-impl std::ops::Deref for SlabFlags {
+impl std::ops::Deref for BlockFlags {
     type Target = [AtomicBool];
     fn deref(&self) -> &[AtomicBool] {
         &self.0
@@ -147,7 +147,7 @@ pub(crate) struct Phase<'a> {
     /// Its number of tasks.
     pub(crate) tasks: usize,
     /// For a phase over the mesh's blocks: each task's earlier tasks in the phase, which it
-    /// waits for ([`Slabs::waits_for`](super::tet_mesh::Slabs)), and one flag per task.
+    /// waits for ([`Blocks::waits_for`](super::tet_mesh::Blocks)), and one flag per task.
     pub(crate) order: Option<(&'a super::tet_mesh::Csr, &'a [AtomicBool])>,
 }
 

@@ -144,7 +144,7 @@ pub struct TetMesh {
     /// gathered in one small array, not on the whole body's.
     ring_corners: Vec<[u16; 4]>,
     tet_neighbours: Csr,
-    slabs: Slabs,
+    blocks: Blocks,
     reoriented_tets: usize,
 }
 
@@ -152,18 +152,18 @@ pub struct TetMesh {
 /// blocks in a pass.
 ///
 /// Each vertex has two layer numbers, its graph distance (in edges) from each of two opposite
-/// faces of the mesh's bounding box, across two axes; a block holds [`Slabs::width`] layers of
+/// faces of the mesh's bounding box, across two axes; a block holds [`Blocks::width`] layers of
 /// each. Blocks that are not neighbours (in either layer count) are at least `width + 1 >= 4`
 /// edges apart, which is what lets them run at the same time: a ring impulse moves the
 /// particles one edge from its centre and reads those up to two edges further, a tet impulse
 /// moves its corners and reads one edge further, a spring moves its two ends. Blocks run in
 /// four colours (the parities of their two block numbers), so neighbours never share a colour.
 /// The result is that of running the tasks (blocks) one after another in their order; a task
-/// need only wait for its neighbours earlier in that order ([`Slabs::waits_for`]), and no
+/// need only wait for its neighbours earlier in that order ([`Blocks::waits_for`]), and no
 /// task touches what another task it does not wait for (and which does not wait for it)
 /// writes (tested for every kind of job in `tests`).
 #[derive(Clone, Debug)]
-pub struct Slabs {
+pub struct Blocks {
     /// Vertices of each task, in index order: the ring impulses' centres.
     pub vertices: Csr,
     /// Tets of each task (the block of their lowest layers), in index order.
@@ -177,16 +177,16 @@ pub struct Slabs {
     pub width: [u32; 2],
 }
 
-/// Blocks are at least this many layers wide: see [`Slabs`].
-pub const MIN_SLAB_WIDTH: u32 = 3;
+/// Blocks are at least this many layers wide: see [`Blocks`].
+pub const MIN_BLOCK_WIDTH: u32 = 3;
 
 /// Particles per 64-byte cache line of a `Vec3` array, about.
 const PARTICLES_PER_LINE: usize = 5;
 
 /// A mesh is cut into at most about this many blocks along each of its two axes.
-pub const MAX_SLABS: u32 = 16;
+pub const MAX_BLOCKS_PER_AXIS: u32 = 16;
 
-impl Slabs {
+impl Blocks {
     /// Number of tasks (blocks).
     pub fn count(&self) -> usize {
         self.vertices.len()
@@ -234,7 +234,7 @@ impl Slabs {
         tets: &[[u32; 4]],
         edges: &[[u32; 2]],
         ring_vertices: &Csr,
-    ) -> Slabs {
+    ) -> Blocks {
         let n = positions.len();
         let lo = positions.iter().fold(Vec3::INFINITY, |lo, &p| lo.min(p));
         let mean_edge = edges
@@ -253,7 +253,7 @@ impl Slabs {
             )
         });
         let block_of = |(layer, count): &(Vec<u32>, u32)| {
-            let width = MIN_SLAB_WIDTH.max(count.div_ceil(MAX_SLABS));
+            let width = MIN_BLOCK_WIDTH.max(count.div_ceil(MAX_BLOCKS_PER_AXIS));
             let blocks: Vec<u32> = layer.iter().map(|&l| l / width).collect();
             (blocks, count.div_ceil(width), width)
         };
@@ -324,7 +324,7 @@ impl Slabs {
                 }
             }
         }
-        Slabs {
+        Blocks {
             vertices: Csr::from_pairs(count, &vertex_pairs),
             tets: Csr::from_pairs(count, &tet_pairs),
             edges: Csr::from_pairs(count, &edge_pairs),
@@ -485,7 +485,7 @@ impl TetMesh {
             }
         }
         let tet_neighbours = Csr::from_pairs(tets.len(), &neighbour_pairs);
-        let slabs = Slabs::new(&positions, &tets, &edges, &ring_vertices);
+        let blocks = Blocks::new(&positions, &tets, &edges, &ring_vertices);
 
         Ok(TetMesh {
             positions,
@@ -497,7 +497,7 @@ impl TetMesh {
             ring_border_tets,
             ring_corners,
             tet_neighbours,
-            slabs,
+            blocks,
             reoriented_tets,
         })
     }
@@ -575,9 +575,9 @@ impl TetMesh {
         self.tet_neighbours.row(t)
     }
 
-    /// The slabs the passes run in, two phases of independent slabs (see [`Slabs`]).
-    pub fn slabs(&self) -> &Slabs {
-        &self.slabs
+    /// The blocks the volume passes and the forces run in, in their order (see [`Blocks`]).
+    pub fn blocks(&self) -> &Blocks {
+        &self.blocks
     }
 
     /// Number of vertices.
@@ -715,8 +715,8 @@ mod tests {
                 .mesh,
         ];
         for mesh in &meshes {
-            let slabs = mesh.slabs();
-            assert!(slabs.count() >= 6, "{} tasks", slabs.count());
+            let blocks = mesh.blocks();
+            assert!(blocks.count() >= 6, "{} tasks", blocks.count());
             let n2 = |vertices: &[u32]| -> Vec<u32> {
                 vertices
                     .iter()
@@ -734,19 +734,19 @@ mod tests {
                 (moved, read)
             };
             let edge = |e: u32| (mesh.edges()[e as usize].to_vec(), vec![]);
-            let waits = &slabs.waits_for;
-            assert!(tasks_are_ordered(mesh, &slabs.vertices, waits, ring));
-            assert!(tasks_are_ordered(mesh, &slabs.tets, waits, tet));
-            assert!(tasks_are_ordered(mesh, &slabs.edges, waits, edge));
+            let waits = &blocks.waits_for;
+            assert!(tasks_are_ordered(mesh, &blocks.vertices, waits, ring));
+            assert!(tasks_are_ordered(mesh, &blocks.tets, waits, tet));
+            assert!(tasks_are_ordered(mesh, &blocks.edges, waits, edge));
             // Tasks only wait for earlier ones, and some run without waiting at all.
-            for task in 0..slabs.count() {
+            for task in 0..blocks.count() {
                 assert!(waits.row(task).iter().all(|&w| (w as usize) < task));
             }
             assert!(waits.row(1).is_empty());
             // Every vertex, tet and spring in exactly one task.
-            assert_eq!(slabs.vertices.total(), mesh.vertex_count());
-            assert_eq!(slabs.tets.total(), mesh.tet_count());
-            assert_eq!(slabs.edges.total(), mesh.edges().len());
+            assert_eq!(blocks.vertices.total(), mesh.vertex_count());
+            assert_eq!(blocks.tets.total(), mesh.tet_count());
+            assert_eq!(blocks.edges.total(), mesh.edges().len());
         }
         // And the check finds what is wrong: tasks one layer wide, none waiting.
         let mesh = &meshes[0];
