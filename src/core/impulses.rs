@@ -831,8 +831,9 @@ impl PassView<'_> {
                 }
             }
             // Unused lanes hold a tet collapsed onto the centre: zero edges, volume and error.
+            // Every tet's last corner is the centre (see `TetMesh::ring_corners`).
             let x = |k: usize| gather(&work.previews, &tet_corners, k);
-            let xd = x(3);
+            let xd = Vec3x4::splat(work.previews[0]);
             let edges = [x(0) - xd, x(1) - xd, x(2) - xd];
             let sixth = f32x4::splat(SIXTH);
             let gradients = [
@@ -865,6 +866,10 @@ impl PassView<'_> {
         // stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
         let mut stiffest = 0.0f32;
         let mut any = false;
+        // The centre is every tet's last corner: its direction is summed here, not in memory
+        // (one add after another into the same element waited on each other's store).
+        let mut centre = Vec3::ZERO;
+        let centre_inv_mass = f32x4::splat(work.inv_masses[0]);
         for (group, lanes) in work.tets[..groups].iter().enumerate() {
             let tet_corners: [[u16; 4]; LANES] =
                 std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
@@ -873,7 +878,11 @@ impl PassView<'_> {
             let mut stiffness = f32x4::ZERO;
             let mut d = [Vec3x4::ZERO; 4];
             for k in 0..4 {
-                let w = f32x4::new(gather_f32(&work.inv_masses, &tet_corners, k));
+                let w = if k == 3 {
+                    centre_inv_mass
+                } else {
+                    f32x4::new(gather_f32(&work.inv_masses, &tet_corners, k))
+                };
                 stiffness += w * g[k].length_squared();
                 d[k] = g[k].scale(-w * lanes.error);
             }
@@ -884,12 +893,15 @@ impl PassView<'_> {
                     continue;
                 }
                 stiffest = stiffest.max(stiffness[l]);
-                for k in 0..4 {
+                for k in 0..3 {
                     work.directions[tet_corners[l][k] as usize] += d[k][l];
                     any |= d[k][l] != Vec3::ZERO;
                 }
+                centre += d[3][l];
+                any |= d[3][l] != Vec3::ZERO;
             }
         }
+        work.directions[0] = centre;
         let tet_step = 1.0 / stiffest as f64;
         if !any {
             return ImpulseOutcome::Skipped;
@@ -906,7 +918,7 @@ impl PassView<'_> {
             let tet_corners: [[u16; 4]; LANES] =
                 std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
             let dir = |k: usize| gather(&work.directions, &tet_corners, k);
-            let dd = dir(3);
+            let dd = Vec3x4::splat(work.directions[0]);
             let (fa, fb, fc) = (dir(0) - dd, dir(1) - dd, dir(2) - dd);
             let [ga, gb, gc] = lanes.gradients;
             let [ea, eb, ec] = lanes.edges;

@@ -30,6 +30,16 @@ impl Vec3x4 {
         z: f32x4::ZERO,
     };
 
+    /// `v` in every lane.
+    #[inline(always)]
+    pub fn splat(v: Vec3) -> Vec3x4 {
+        Vec3x4 {
+            x: f32x4::splat(v.x),
+            y: f32x4::splat(v.y),
+            z: f32x4::splat(v.z),
+        }
+    }
+
     /// The four vectors `v`, lane `l` holding `v[l]`.
     #[inline(always)]
     pub fn from_vecs(v: [Vec3; LANES]) -> Vec3x4 {

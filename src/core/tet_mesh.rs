@@ -465,7 +465,17 @@ impl TetMesh {
                 local[i as usize] = k as u16;
             }
             for &t in one_rings.row(p) {
-                ring_corners.push(tets[t as usize].map(|i| local[i as usize]));
+                let [a, b, c, d] = tets[t as usize].map(|i| local[i as usize]);
+                // The centre (local 0) last, by an even permutation (the same orientation).
+                ring_corners.push(if a == 0 {
+                    [d, c, b, a]
+                } else if b == 0 {
+                    [c, d, a, b]
+                } else if c == 0 {
+                    [b, a, d, c]
+                } else {
+                    [a, b, c, d]
+                });
             }
         }
 
@@ -540,7 +550,9 @@ impl TetMesh {
     }
 
     /// For each tet of [`TetMesh::one_ring`]`(p)`, the indices of its four vertices in
-    /// [`TetMesh::ring_vertices`]`(p)`.
+    /// [`TetMesh::ring_vertices`]`(p)`, reordered so that `p` (index 0) comes last with the
+    /// tet's orientation kept (an even permutation: the same signed volume). The ring impulse
+    /// then reads the centre once for all its tets instead of gathering it for each.
     #[inline]
     pub fn ring_corners(&self, p: usize) -> &[[u16; 4]] {
         &self.ring_corners[self.one_rings.range(p)]
@@ -857,6 +869,29 @@ mod tests {
         ];
         let m = TetMesh::new(regular, vec![[0, 1, 2, 3]]).unwrap();
         assert!((m.min_dihedral_deg() - (1.0f32 / 3.0).acos().to_degrees()).abs() < 1e-3);
+    }
+
+    #[test]
+    fn ring_corners_put_the_centre_last_and_keep_each_tets_volume() {
+        let m =
+            crate::core::grid::box_grid(glam::UVec3::new(3, 3, 2), Vec3::splat(0.5), Vec3::ZERO)
+                .unwrap();
+        for p in 0..m.vertex_count() {
+            let ring = m.ring_vertices(p);
+            for (&t, corners) in m.one_ring(p).iter().zip(m.ring_corners(p)) {
+                assert_eq!(corners[3], 0, "vertex {p}, tet {t}");
+                let mut mine = corners.map(|k| ring[k as usize]);
+                let mut tet = m.tets()[t as usize];
+                let volume = signed_volume(&mine.map(|i| m.positions()[i as usize]));
+                let rest = m.rest_volumes()[t as usize];
+                // Rounding differs with the corner measured from; an odd permutation would
+                // flip the sign.
+                assert!((volume - rest).abs() <= 1e-5 * rest, "vertex {p}, tet {t}");
+                mine.sort();
+                tet.sort();
+                assert_eq!(mine, tet);
+            }
+        }
     }
 
     #[test]
