@@ -68,20 +68,23 @@ pub enum ImpulseOutcome {
 /// the volume moves by at most `drift_bound(m, G, L)`, with `G` the sum of the lengths of the
 /// tet's volume gradients and `L` its longest edge from its last vertex, both at the start. A
 /// particle's drift is the distance of its preview from where it was at the start of the pass.
-/// An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its floor
-/// when `drift_bound(drift + m, region_grad, region_reach)` is below `region_slack`, the smallest slack
-/// above the floor in the region at the start of the pass; then the clamp's answer is known (no
-/// shortening) and its walk over the neighbours is skipped. `drift` is first the largest drift
-/// any particle the impulse's block can reach has had in the pass (`PassWorker::max_moved`,
-/// free to check); if that is not enough, the region is checked one impulse vertex at a time,
-/// each vertex's one-ring against its own slack and reach with the farthest any of its ring
-/// vertices can get from its start (its drift plus its own move), and only the one-rings of the vertices this does not
-/// clear are walked (in the soft cube under its sphere, walks of whole regions looked at 113 000
-/// tets per step, about 130 per walk, to shorten 15 impulses); and in a walk, each tet against
-/// its own bounds with how far each of its own four particles can be from its start. A tet already below `eps` at the start gets as slack half of
-/// `CLAMP_SLACK` (the drift before an impulse and the impulse itself each count once), and no more
-/// than its distance to `eps`, so that it cannot climb above `eps` unseen, where the exact rule
-/// would no longer let it drop.
+///
+/// An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its
+/// floor when `drift_bound(drift + m, region_grad, region_reach)` is below `region_slack`, the
+/// smallest slack above the floor in the region at the start of the pass; then the clamp's
+/// answer is known (no shortening) and its walk over the neighbours is skipped. There `drift` is
+/// the largest drift any particle the impulse's block can reach has had in the pass
+/// (`PassWorker::max_moved`, free to check). If that is not enough, the region is checked one
+/// impulse vertex at a time, each vertex's one-ring against its own slack and reach with the
+/// farthest any of its ring vertices can be from its start (its drift plus its own move), and
+/// only the one-rings of the vertices this does not clear are walked (in the soft cube under its
+/// sphere, walks of whole regions looked at 113 000 tets per step, about 130 per walk, to
+/// shorten 15 impulses). In a walk, each tet is checked against its own bounds with how far
+/// each of its own four particles can be from its start.
+///
+/// A tet already below `eps` at the start gets as slack half of `CLAMP_SLACK` (the drift before
+/// an impulse and the impulse itself each count once), and no more than its distance to `eps`,
+/// so that it cannot climb above `eps` unseen, where the exact rule would no longer let it drop.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct ClampBounds {
     /// Whether the bounds describe the current pass.
@@ -279,7 +282,7 @@ pub(crate) struct ClampMotion {
     /// impulse does not move), so the walk reads one number per vertex.
     move_len: Vec<f32>,
     /// During a clamp walk over the one-rings of unclear vertices (see
-    /// [`PassView::clamp_check`]), each such vertex's place in that list, from 1 (zero for
+    /// [`PassView::clamp_unclear`]), each such vertex's place in that list, from 1 (zero for
     /// every other particle): a tet holding a vertex listed earlier was already looked at.
     unclear_rank: Vec<u32>,
 }
@@ -296,6 +299,7 @@ pub(crate) struct PassWorker {
     /// shrink again; this cannot).
     max_moved: f32,
     sphere_dv: Vec<Vec3>,
+    /// The neighbour clamp's working list.
     clamp: ClampWork,
 }
 
@@ -304,6 +308,8 @@ pub(crate) struct PassWorker {
 pub(crate) struct ClampWork {
     /// The vertices of the impulse being clamped whose one-rings the bounds could not clear:
     /// the clamp walks only their one-rings.
+    /// Sized for the largest clamp region's vertices up front (a clone of a `Vec` with spare
+    /// capacity has none, and the step must not allocate).
     unclear: Vec<u32>,
 }
 
@@ -313,7 +319,7 @@ impl PassWorker {
         PassWorker {
             ring_work: RingWork::for_mesh(mesh),
             clamp: ClampWork {
-                unclear: Vec::with_capacity(mesh.max_ring_vertices()),
+                unclear: vec![0; mesh.max_ring_vertices()],
             },
             ..Default::default()
         }
@@ -1093,12 +1099,12 @@ impl PassView<'_> {
         }
         self.set_move_lengths(vertices, true);
         let clamped = if b.active {
-            self.find_unclear(vertices, step as f32, &mut work.unclear);
-            if work.unclear.is_empty() {
+            let unclear = self.find_unclear(vertices, step as f32, &mut work.unclear);
+            if unclear.is_empty() {
                 counters.clamps_skipped += 1;
                 step
             } else {
-                self.clamp_unclear(&work.unclear, step)
+                self.clamp_unclear(unclear, step)
             }
         } else {
             self.neighbour_clamp(whole_region, step)
@@ -1108,14 +1114,15 @@ impl PassView<'_> {
         clamped
     }
 
-    /// The impulse `vertices` whose one-rings the bounds do not clear, into `unclear`. Every
-    /// tet the impulse touches is in the one-ring of one of `vertices`, and its particles are
-    /// ring vertices of that vertex; each of those is at most its drift plus its own move from
-    /// where it was at the start of the pass, so a one-ring whose vertex bounds allow the
-    /// largest such distance among its ring vertices is safe. Needs `set_move_lengths`.
-    fn find_unclear(&self, vertices: &[u32], step: f32, unclear: &mut Vec<u32>) {
+    /// The impulse `vertices` whose one-rings the bounds do not clear (written into `unclear`,
+    /// which has room for all of them). Every tet the impulse touches is in the one-ring of one
+    /// of `vertices`, and its particles are ring vertices of that vertex; each of those is at
+    /// most its drift plus its own move from where it was at the start of the pass, so a
+    /// one-ring whose vertex bounds allow the largest such distance among its ring vertices is
+    /// safe. Needs `set_move_lengths`.
+    fn find_unclear<'u>(&self, vertices: &[u32], step: f32, unclear: &'u mut [u32]) -> &'u [u32] {
         let (b, mesh) = (self.bounds, self.mesh);
-        unclear.clear();
+        let mut count = 0;
         for &v in vertices {
             let reach = mesh
                 .ring_vertices(v as usize)
@@ -1126,9 +1133,11 @@ impl PassView<'_> {
             if drift_bound(reach, b.vertex_grad.get(v), b.vertex_reach.get(v))
                 >= b.vertex_slack.get(v)
             {
-                unclear.push(v as u32);
+                unclear[count] = v as u32;
+                count += 1;
             }
         }
+        &unclear[..count]
     }
 
     /// The neighbour clamp over the one-rings of the `unclear` vertices of
