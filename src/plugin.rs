@@ -366,6 +366,22 @@ fn few_bodies(bodies: &Query<(&mut SoftBody, &mut SoftBodyStats)>) -> bool {
     bodies.iter().count() < threads
 }
 
+/// Runs `run` on every body: one body per task on the compute task pool, or a single body on
+/// this thread (not handed to another, which may first have to wake up).
+fn for_each_body(
+    bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    run: impl Fn((Mut<SoftBody>, Mut<SoftBodyStats>)) + Send + Sync + Clone,
+) {
+    if bodies.iter().len() == 1 {
+        bodies.iter_mut().for_each(run);
+    } else {
+        bodies
+            .par_iter_mut()
+            .batching_strategy(ONE_BODY_PER_TASK)
+            .for_each(run);
+    }
+}
+
 /// Runs `stage` on every body, in parallel on the compute task pool, timing each body.
 fn par_bodies(
     bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
@@ -377,15 +393,7 @@ fn par_bodies(
         stage(&mut body.state, &mut stats);
         body.step_time += start.elapsed();
     };
-    // One body: on this thread, not handed to another (which may first have to wake up).
-    if bodies.iter().len() == 1 {
-        bodies.iter_mut().for_each(run);
-    } else {
-        bodies
-            .par_iter_mut()
-            .batching_strategy(ONE_BODY_PER_TASK)
-            .for_each(run);
-    }
+    for_each_body(bodies, run);
 }
 
 /// Runs `pass` on every body in parallel, each against its own copy of the spheres as they were
@@ -412,14 +420,7 @@ fn par_with_spheres(
         pass(&mut body.state, &mut stats, &mut body.spheres, colliders);
         body.step_time += start.elapsed();
     };
-    if bodies.iter().len() == 1 {
-        bodies.iter_mut().for_each(run);
-    } else {
-        bodies
-            .par_iter_mut()
-            .batching_strategy(ONE_BODY_PER_TASK)
-            .for_each(run);
-    }
+    for_each_body(bodies, run);
     if solver.states.is_empty() {
         return;
     }
