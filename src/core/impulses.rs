@@ -236,12 +236,10 @@ impl BoundsView<'_> {
         vertices: Range<usize>,
     ) {
         for v in vertices {
-            let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
-            for &t in mesh.one_ring(v) {
-                slack = smaller(slack, self.tet_slack.get(t as usize));
-                grad = larger(grad, self.tet_grad.get(t as usize));
-                reach = larger(reach, self.tet_reach.get(t as usize));
-            }
+            let (slack, grad, reach) = extremes(
+                mesh.one_ring(v),
+                [self.tet_slack, self.tet_grad, self.tet_reach],
+            );
             self.vertex_slack.set(v, slack);
             self.vertex_grad.set(v, grad);
             self.vertex_reach.set(v, reach);
@@ -259,17 +257,29 @@ impl BoundsView<'_> {
                 ClampRegions::Rings => mesh.ring_vertices(r),
                 ClampRegions::Tets => &mesh.tets()[r],
             };
-            let (mut slack, mut grad, mut reach) = (f32::INFINITY, 0.0f32, 0.0f32);
-            for &v in vertices {
-                slack = smaller(slack, self.vertex_slack.get(v as usize));
-                grad = larger(grad, self.vertex_grad.get(v as usize));
-                reach = larger(reach, self.vertex_reach.get(v as usize));
-            }
+            let (slack, grad, reach) = extremes(
+                vertices,
+                [self.vertex_slack, self.vertex_grad, self.vertex_reach],
+            );
             self.region_slack.set(r, slack);
             self.region_grad.set(r, grad);
             self.region_reach.set(r, reach);
         }
     }
+}
+
+/// The smallest slack and the largest gradient sum and reach among `items` of
+/// `[slack, grad, reach]`: the bounds of their union.
+#[inline]
+fn extremes(items: &[u32], [slack, grad, reach]: [SharedSlice<f32>; 3]) -> (f32, f32, f32) {
+    let mut bounds = (f32::INFINITY, 0.0f32, 0.0f32);
+    for &i in items {
+        let i = i as usize;
+        bounds.0 = smaller(bounds.0, slack.get(i));
+        bounds.1 = larger(bounds.1, grad.get(i));
+        bounds.2 = larger(bounds.2, reach.get(i));
+    }
+    bounds
 }
 
 /// What the clamp bounds track while a pass runs, per particle.
