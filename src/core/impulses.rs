@@ -31,16 +31,16 @@
 use std::ops::Range;
 
 use glam::Vec3;
-use wide::{CmpGt, f32x4};
+use wide::{CmpGt, CmpLe, f32x4};
 
 use super::body::{SoftBodyState, StepCounters};
 use super::contacts::RigidSphereState;
-use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_with_edges};
+use super::geometry::{SIXTH, signed_volume, volume_polynomial};
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
 use super::roots::{Cubic, first_crossing, monotone_root};
-use super::tet_mesh::{Csr, TetMesh};
+use super::tet_mesh::{Csr, NO_TET, TetMesh};
 
 /// What one impulse did.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -489,13 +489,15 @@ impl SoftBodyState {
             parallel,
             regions,
             &mesh.blocks().vertices,
-            &|view, worker, p| {
-                view.ring_impulse(
-                    worker,
-                    p as usize,
-                    settings.tolerance,
-                    settings.neighbour_clamp,
-                );
+            &|view, worker, centres| {
+                for &p in centres {
+                    view.ring_impulse(
+                        worker,
+                        p as usize,
+                        settings.tolerance,
+                        settings.neighbour_clamp,
+                    );
+                }
             },
         );
     }
@@ -529,15 +531,17 @@ impl SoftBodyState {
             spheres,
             parallel,
             regions,
-            &mesh.blocks().tets,
-            &|view, worker, t| {
-                view.tet_impulse(worker, t as usize, &settings);
+            &mesh.blocks().tet_bundles,
+            &|view, worker, bundles| {
+                for bundle in bundles.chunks(LANES) {
+                    view.tet_bundle(worker, bundle, &settings);
+                }
             },
         );
     }
 
-    /// Runs `impulse` on every item of every task of the mesh's [`Blocks`] (`items` picks the
-    /// vertices or the tets), each task's items in order, with the result of running the tasks
+    /// Runs `impulse` on each task's row of `items` (the mesh's [`Blocks`]' vertices or tet
+    /// bundles), which it works through in order, with the result of running the tasks
     /// one after another (see [`super::parallel`]): the threads of `parallel` take tasks in
     /// order as they come free, each waiting for the earlier tasks it shares particles with. A
     /// thread only ever waits for tasks a running thread has already taken, so any number of
@@ -552,7 +556,7 @@ impl SoftBodyState {
         parallel: &dyn Parallel,
         clamp_regions: Option<ClampRegions>,
         items: &Csr,
-        impulse: &(dyn Fn(&PassView, &mut PassWorker, u32) + Sync),
+        impulse: &(dyn Fn(&PassView, &mut PassWorker, &[u32]) + Sync),
     ) {
         for worker in &mut self.pass_workers {
             worker.counters = StepCounters::default();
@@ -645,9 +649,7 @@ impl SoftBodyState {
                         // Safety: each task is run by one thread only.
                         let worker = unsafe { workers.get_mut(task) };
                         worker.max_moved = start_drift;
-                        for &item in items.row(task) {
-                            impulse(&view, worker, item);
-                        }
+                        impulse(&view, worker, items.row(task));
                     }
                 }
             });
@@ -702,7 +704,9 @@ impl SoftBodyState {
     ) -> ImpulseOutcome {
         let mut worker = PassWorker::for_mesh(&self.mesh);
         worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
-        let outcome = self.single_view(h).tet_impulse(&mut worker, t, settings);
+        let [outcome, ..] = self
+            .single_view(h)
+            .tet_bundle(&mut worker, &[t as u32], settings);
         self.finish_single(worker, spheres);
         outcome
     }
@@ -993,75 +997,138 @@ impl PassView<'_> {
         }
     }
 
-    /// The per-tet impulse of tet `t`: its four particles move by `gamma * s * d_i`, `s` being the
-    /// smallest positive root of `V_t(s) = V0_t`. Needs `refresh_previews` first.
-    fn tet_impulse(
+    /// The per-tet impulses of a bundle of [`LANES`] tets that share no vertex (see
+    /// [`Blocks::tet_bundles`]; [`NO_TET`] marks an empty lane), one after another: each tet's
+    /// four particles move by `gamma * s * d_i`, `s` being the smallest positive root of
+    /// `V_t(s) = V0_t`. Needs `refresh_previews` first.
+    ///
+    /// No impulse of the bundle moves a particle another of its tets reads, so the volumes,
+    /// directions and cubics of all four are computed at once in SIMD lanes ([`Vec3x4`]) from
+    /// the previews as they are before the first; only the roots, the clamps (whose regions
+    /// overlap) and the velocity changes go lane by lane, in order.
+    ///
+    /// [`Blocks::tet_bundles`]: super::tet_mesh::Blocks::tet_bundles
+    fn tet_bundle(
         &self,
         worker: &mut PassWorker,
-        t: usize,
+        bundle: &[u32],
         settings: &ImpulseSettings,
-    ) -> ImpulseOutcome {
+    ) -> [ImpulseOutcome; LANES] {
+        let mut outcomes = [ImpulseOutcome::Skipped; LANES];
         let mesh = self.mesh;
         let (gamma, tolerance, clamp) = (
             settings.gamma as f64,
             settings.tolerance,
             settings.neighbour_clamp,
         );
-        let tet = mesh.tets()[t];
-        let v0 = mesh.rest_volumes()[t];
-        let xp = tet.map(|i| self.preview(i));
-        let (ea, eb, ec) = (xp[0] - xp[3], xp[1] - xp[3], xp[2] - xp[3]);
-        // `signed_volume`, keeping the cross product that is also a's gradient.
-        let ebc = eb.cross(ec);
-        let volume = ea.dot(ebc) * SIXTH;
-        let c = volume - v0;
-        if c == 0.0 || c.abs() <= tolerance * v0 {
-            return ImpulseOutcome::Skipped;
-        }
-        let ga = ebc * SIXTH;
-        let gb = ec.cross(ea) * SIXTH;
-        let gc = ea.cross(eb) * SIXTH;
-        let g = [ga, gb, gc, -(ga + gb + gc)];
-        let d: [Vec3; 4] = std::array::from_fn(|k| {
-            let i = tet[k] as usize;
-            self.constrain_direction(i, -self.inv_masses[i] * c * g[k])
+        // An empty lane holds a tet collapsed onto particle 0 with no rest volume: no error.
+        let tets: [[u32; 4]; LANES] = std::array::from_fn(|l| match bundle.get(l) {
+            Some(&t) if t != NO_TET => mesh.tets()[t as usize],
+            _ => [0; 4],
         });
-        if d.iter().all(|&x| x == Vec3::ZERO) {
-            return ImpulseOutcome::Skipped;
+        let v0 = f32x4::new(std::array::from_fn(|l| match bundle.get(l) {
+            Some(&t) if t != NO_TET => mesh.rest_volumes()[t as usize],
+            _ => 0.0,
+        }));
+        let corner =
+            |k: usize| Vec3x4::from_vecs(std::array::from_fn(|l| self.preview(tets[l][k])));
+        let xd = corner(3);
+        let (ea, eb, ec) = (corner(0) - xd, corner(1) - xd, corner(2) - xd);
+        let sixth = f32x4::splat(SIXTH);
+        // The signed volume, keeping the cross product that is also a's gradient.
+        let ebc = eb.cross(ec);
+        let volume = ea.dot(ebc) * sixth;
+        let c = volume - v0;
+        // Within tolerance (or exactly at rest): no impulse. A broken (NaN) volume is not
+        // within tolerance; its cubic has no root and it is counted.
+        let within = c.abs().cmp_le(f32x4::splat(tolerance) * v0);
+        let act = (!within).move_mask();
+        if act == 0 {
+            return outcomes;
         }
-        let mut poly = volume_polynomial_with_edges(&[ea, eb, ec], volume, &g, &d);
-        poly[0] -= v0 as f64;
-        let Some(root) = monotone_root(&poly) else {
-            worker.counters.tets_without_root += 1;
-            return ImpulseOutcome::NoRoot;
-        };
-        let full = gamma * root;
-        let mut step = full;
-        if clamp {
-            let largest = d.iter().map(|x| x.length_squared()).fold(0.0f32, larger);
-            step = self.clamp(
-                &mut worker.clamp,
-                &mut worker.counters,
-                worker.max_moved,
-                t,
-                &tet,
-                &d,
-                largest.sqrt(),
+        let ga = ebc.scale(sixth);
+        let gb = ec.cross(ea).scale(sixth);
+        let gc = ea.cross(eb).scale(sixth);
+        let g = [ga, gb, gc, -(ga + gb + gc)];
+        let mut d: [Vec3x4; 4] = std::array::from_fn(|k| {
+            let w = f32x4::new(std::array::from_fn(|l| {
+                self.inv_masses[tets[l][k] as usize]
+            }));
+            g[k].scale(-w * c)
+        });
+        if self.any_touching {
+            // `constrain_direction` in lanes: a particle touching nothing has a zero normal.
+            for (k, dk) in d.iter_mut().enumerate() {
+                let normal = Vec3x4::from_vecs(std::array::from_fn(|l| {
+                    self.contact_normals[tets[l][k] as usize]
+                }));
+                let kept = f32x4::new(std::array::from_fn(|l| {
+                    self.contact_kept[tets[l][k] as usize]
+                }));
+                let into = dk.dot(normal).min(f32x4::ZERO);
+                *dk = *dk - normal.scale(into * (f32x4::ONE - kept));
+            }
+        }
+        // The volume polynomial (see `volume_polynomial_with_edges`).
+        let (fa, fb, fc) = (d[0] - d[3], d[1] - d[3], d[2] - d[3]);
+        let c1 = ga.dot(fa) + gb.dot(fb) + gc.dot(fc);
+        let fbc = fb.cross(fc);
+        let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
+        let c3 = fa.dot(fbc);
+        let (volume, v0) = (volume.to_array(), v0.to_array());
+        let (c1, c2, c3) = (c1.to_array(), c2.to_array(), c3.to_array());
+        let d = d.map(Vec3x4::to_vecs);
+        for l in 0..LANES {
+            if act & (1 << l) == 0 {
+                continue;
+            }
+            let tet = tets[l];
+            let dl: [Vec3; 4] = std::array::from_fn(|k| d[k][l]);
+            if dl.iter().all(|&x| x == Vec3::ZERO) {
+                continue;
+            }
+            let sixth = 1.0 / 6.0;
+            let poly: Cubic = [
+                volume[l] as f64 - v0[l] as f64,
+                c1[l] as f64,
+                c2[l] as f64 * sixth,
+                c3[l] as f64 * sixth,
+            ];
+            let Some(root) = monotone_root(&poly) else {
+                worker.counters.tets_without_root += 1;
+                outcomes[l] = ImpulseOutcome::NoRoot;
+                continue;
+            };
+            let full = gamma * root;
+            let mut step = full;
+            if clamp {
+                let t = bundle[l];
+                let largest = dl.iter().map(|x| x.length_squared()).fold(0.0f32, larger);
+                step = self.clamp(
+                    &mut worker.clamp,
+                    &mut worker.counters,
+                    worker.max_moved,
+                    t as usize,
+                    &tet,
+                    &dl,
+                    largest.sqrt(),
+                    step,
+                    std::iter::once(&t).chain(mesh.tet_neighbours(t as usize)),
+                );
+            }
+            let clamped = step < full;
+            worker.counters.tets_clamped += clamped as u32;
+            let scale = (step / self.h as f64) as f32;
+            for k in 0..4 {
+                self.apply_velocity_change(worker, tet[k] as usize, scale * dl[k]);
+            }
+            outcomes[l] = ImpulseOutcome::Applied {
                 step,
-                std::iter::once(&(t as u32)).chain(mesh.tet_neighbours(t)),
-            );
+                root,
+                clamped,
+            };
         }
-        let clamped = step < full;
-        worker.counters.tets_clamped += clamped as u32;
-        let scale = (step / self.h as f64) as f32;
-        for k in 0..4 {
-            self.apply_velocity_change(worker, tet[k] as usize, scale * d[k]);
-        }
-        ImpulseOutcome::Applied {
-            step,
-            root,
-            clamped,
-        }
+        outcomes
     }
 
     /// Volume polynomial of `tet` when its particles move from their previewed positions along

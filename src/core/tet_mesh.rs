@@ -4,6 +4,7 @@
 use glam::Vec3;
 
 use super::geometry::{min_dihedral_deg, signed_volume};
+use super::lanes::LANES;
 
 /// Compressed rows: row `i` is `items[offsets[i]..offsets[i + 1]]`.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -168,6 +169,11 @@ pub struct Blocks {
     pub vertices: Csr,
     /// Tets of each task (the block of their lowest layers), in index order.
     pub tets: Csr,
+    /// The same tets of each task in bundles of [`LANES`] that share no vertex, padded with
+    /// [`NO_TET`] (see [`bundle_tets`]): the per-tet pass computes a bundle's tets side by side
+    /// in SIMD lanes, and since no impulse of a bundle moves a particle of another, that is
+    /// exactly the four impulses one after another.
+    pub tet_bundles: Csr,
     /// Springs (indices into [`TetMesh::edges`]) of each task, like the tets.
     pub edges: Csr,
     /// For each task, the earlier tasks it must wait for: its neighbouring blocks of earlier
@@ -175,6 +181,51 @@ pub struct Blocks {
     pub waits_for: Csr,
     /// Layers per block, in each of the two layer counts.
     pub width: [u32; 2],
+}
+
+/// The padding of [`Blocks::tet_bundles`]: no tet.
+pub const NO_TET: u32 = u32::MAX;
+
+/// How far ahead in a task's tets [`bundle_tets`] looks for a bundle's other tets.
+const BUNDLE_LOOK_AHEAD: usize = 128;
+
+/// `row`'s tets in bundles of [`LANES`] that share no vertex, padded with [`NO_TET`]. The row
+/// is cut into [`LANES`] parts, which are interleaved (the first tet of each part, then the
+/// second of each, ...), so that a bundle's tets come from parts of the block far apart; then
+/// each bundle starts with the first tet not yet bundled and takes the next ones that share no
+/// vertex with it, looking at most [`BUNDLE_LOOK_AHEAD`] tets ahead. Each lane walks its part
+/// in order (neighbouring tets share cache lines), and few lanes stay empty, even at the end.
+pub fn bundle_tets(tets: &[[u32; 4]], row: &[u32]) -> Vec<u32> {
+    let part = row.len().div_ceil(LANES);
+    let row: Vec<u32> = (0..part)
+        .flat_map(|k| (0..LANES).filter_map(move |p| row.get(p * part + k).copied()))
+        .collect();
+    let mut bundles = Vec::with_capacity(row.len() + row.len() / 8 + LANES);
+    let mut taken = vec![false; row.len()];
+    for first in 0..row.len() {
+        if taken[first] {
+            continue;
+        }
+        taken[first] = true;
+        let mut bundle = vec![row[first]];
+        let ahead = (first + 1..row.len()).take(BUNDLE_LOOK_AHEAD);
+        for next in ahead {
+            if bundle.len() == LANES {
+                break;
+            }
+            let corners = tets[row[next] as usize];
+            let shares = bundle
+                .iter()
+                .any(|&t| tets[t as usize].iter().any(|i| corners.contains(i)));
+            if !taken[next] && !shares {
+                taken[next] = true;
+                bundle.push(row[next]);
+            }
+        }
+        bundles.extend(&bundle);
+        bundles.extend(std::iter::repeat_n(NO_TET, LANES - bundle.len()));
+    }
+    bundles
 }
 
 /// Blocks are at least this many layers wide: see [`Blocks`].
@@ -324,9 +375,18 @@ impl Blocks {
                 }
             }
         }
+        let block_tets = Csr::from_pairs(count, &tet_pairs);
+        let bundle_pairs: Vec<(u32, u32)> = (0..count)
+            .flat_map(|task| {
+                bundle_tets(tets, block_tets.row(task))
+                    .into_iter()
+                    .map(move |t| (task as u32, t))
+            })
+            .collect();
         Blocks {
             vertices: Csr::from_pairs(count, &vertex_pairs),
-            tets: Csr::from_pairs(count, &tet_pairs),
+            tets: block_tets,
+            tet_bundles: Csr::from_pairs(count, &bundle_pairs),
             edges: Csr::from_pairs(count, &edge_pairs),
             waits_for: Csr::from_pairs(count, &wait_pairs),
             width,
@@ -709,6 +769,58 @@ mod tests {
             }
         }
         true
+    }
+
+    #[test]
+    fn tet_bundles_hold_each_tasks_tets_once_and_share_no_vertex() {
+        use crate::core::grid::box_grid;
+        use crate::core::surface_mesh::torus;
+        use crate::core::tetrahedralize::{Resolution, tetrahedralize};
+        use glam::UVec3;
+        let ring = torus(Vec3::ZERO, 1.0, 0.4, 48, 24);
+        let meshes = [
+            box_grid(UVec3::new(6, 6, 24), Vec3::splat(0.1), Vec3::ZERO).unwrap(),
+            box_grid(UVec3::splat(12), Vec3::splat(0.1), Vec3::ZERO).unwrap(),
+            tetrahedralize(&ring.positions, &ring.indices, Resolution::TargetTets(4000))
+                .unwrap()
+                .mesh,
+        ];
+        for (m, mesh) in meshes.iter().enumerate() {
+            let blocks = mesh.blocks();
+            let mut padding = 0;
+            for task in 0..blocks.count() {
+                let bundles = blocks.tet_bundles.row(task);
+                assert_eq!(bundles.len() % LANES, 0);
+                for bundle in bundles.chunks(LANES) {
+                    let corners: Vec<u32> = bundle
+                        .iter()
+                        .filter(|&&t| t != NO_TET)
+                        .flat_map(|&t| mesh.tets()[t as usize])
+                        .collect();
+                    let mut distinct = corners.clone();
+                    distinct.sort_unstable();
+                    distinct.dedup();
+                    assert_eq!(
+                        distinct.len(),
+                        corners.len(),
+                        "bundle {bundle:?} shares a vertex"
+                    );
+                }
+                let mut bundled: Vec<u32> =
+                    bundles.iter().copied().filter(|&t| t != NO_TET).collect();
+                padding += bundles.len() - bundled.len();
+                bundled.sort_unstable();
+                assert_eq!(bundled, blocks.tets.row(task), "task {task}");
+            }
+            // Empty lanes are wasted work: in the boxes few of them, besides those that round
+            // each task up to whole bundles. (Some tasks of the torus hold 56 tets, half
+            // of them around one vertex: two to a bundle at most.)
+            assert!(
+                m == 2 || padding <= LANES * blocks.count() + mesh.tet_count() / 100,
+                "{padding} empty lanes for {} tets",
+                mesh.tet_count()
+            );
+        }
     }
 
     #[test]
