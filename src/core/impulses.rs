@@ -31,7 +31,7 @@
 use std::ops::Range;
 
 use glam::Vec3;
-use wide::{CmpGt, CmpLe, f32x4};
+use wide::{CmpGe, CmpGt, CmpLe, f32x4};
 
 use super::body::{SoftBodyState, StepCounters};
 use super::contacts::RigidSphereState;
@@ -68,19 +68,24 @@ pub enum ImpulseOutcome {
 /// the volume moves by at most `drift_bound(m, G, L)`, with `G` the sum of the lengths of the
 /// tet's volume gradients and `L` its longest edge from its last vertex, both at the start. A
 /// particle's drift is the distance of its preview from where it was at the start of the pass.
+/// Each tet's slack (its volume above its floor at the start) gives it a radius
+/// ([`safe_radius`]): while each of its particles stays within it of its start, the tet stays
+/// above its floor. A vertex's radius is the smallest of its one-ring's, a clamp region's the
+/// smallest of its vertices'.
 ///
 /// An impulse whose own largest move is `m` cannot bring any tet of its clamp region to its
-/// floor when `drift_bound(drift + m, region_grad, region_reach)` is below `region_slack`, the
-/// smallest slack above the floor in the region at the start of the pass; then the clamp's
-/// answer is known (no shortening) and its walk over the neighbours is skipped. There `drift` is
+/// floor when `drift + m` is within the region's radius; then the clamp's answer is known (no
+/// shortening) and its walk over the neighbours is skipped. There `drift` is
 /// the largest drift any particle the impulse's block can reach has had in the pass
 /// (`PassWorker::max_moved`, free to check). If that is not enough, the region is checked one
-/// impulse vertex at a time, each vertex's one-ring against its own slack and reach with the
+/// impulse vertex at a time, each vertex's one-ring against its own radius with the
 /// farthest any of its ring vertices can be from its start (its drift plus its own move), and
 /// only the one-rings of the vertices this does not clear are walked (in the soft cube under its
 /// sphere, walks of whole regions looked at 113 000 tets per step, about 130 per walk, to
-/// shorten 15 impulses). In a walk, each tet is checked against its own bounds with how far
-/// each of its own four particles can be from its start.
+/// shorten 15 impulses). In a walk, each tet is checked against its own radius with how far
+/// each of its own four particles can be from its start. One radius per tet, vertex and region
+/// replaced a slack, a gradient sum and a reach each (their extremes over a region came from
+/// different tets, so the bound was looser, and there were three times as many to compute).
 ///
 /// A tet already below `eps` at the start gets as slack half of `CLAMP_SLACK` (the drift before
 /// an impulse and the impulse itself each count once), and no more than its distance to `eps`,
@@ -91,15 +96,9 @@ pub(crate) struct ClampBounds {
     pub(crate) active: bool,
     /// Never use the bounds (to compare against the exact walk in tests).
     pub(crate) disabled: bool,
-    tet_slack: Vec<f32>,
-    tet_grad: Vec<f32>,
-    tet_reach: Vec<f32>,
-    vertex_slack: Vec<f32>,
-    vertex_grad: Vec<f32>,
-    vertex_reach: Vec<f32>,
-    region_slack: Vec<f32>,
-    region_grad: Vec<f32>,
-    region_reach: Vec<f32>,
+    tet_radius: Vec<f32>,
+    vertex_radius: Vec<f32>,
+    region_radius: Vec<f32>,
     /// Previews at the start of the pass: a particle's drift is its distance from here.
     start: Vec<Vec3>,
 }
@@ -109,15 +108,9 @@ impl ClampBounds {
     fn view(&mut self) -> BoundsView<'_> {
         BoundsView {
             active: self.active,
-            tet_slack: SharedSlice::new(&mut self.tet_slack),
-            tet_grad: SharedSlice::new(&mut self.tet_grad),
-            tet_reach: SharedSlice::new(&mut self.tet_reach),
-            vertex_slack: SharedSlice::new(&mut self.vertex_slack),
-            vertex_grad: SharedSlice::new(&mut self.vertex_grad),
-            vertex_reach: SharedSlice::new(&mut self.vertex_reach),
-            region_slack: SharedSlice::new(&mut self.region_slack),
-            region_grad: SharedSlice::new(&mut self.region_grad),
-            region_reach: SharedSlice::new(&mut self.region_reach),
+            tet_radius: SharedSlice::new(&mut self.tet_radius),
+            vertex_radius: SharedSlice::new(&mut self.vertex_radius),
+            region_radius: SharedSlice::new(&mut self.region_radius),
             start: SharedSlice::new(&mut self.start),
         }
     }
@@ -130,15 +123,9 @@ impl ClampBounds {
             ClampRegions::Tets => tets,
         };
         for (array, len) in [
-            (&mut self.tet_slack, tets),
-            (&mut self.tet_grad, tets),
-            (&mut self.tet_reach, tets),
-            (&mut self.vertex_slack, n),
-            (&mut self.vertex_grad, n),
-            (&mut self.vertex_reach, n),
-            (&mut self.region_slack, count),
-            (&mut self.region_grad, count),
-            (&mut self.region_reach, count),
+            (&mut self.tet_radius, tets),
+            (&mut self.vertex_radius, n),
+            (&mut self.region_radius, count),
             (&mut motion.drift, n),
             (&mut motion.move_len, n),
         ] {
@@ -154,15 +141,9 @@ impl ClampBounds {
 #[derive(Clone, Copy)]
 pub(crate) struct BoundsView<'a> {
     active: bool,
-    tet_slack: SharedSlice<'a, f32>,
-    tet_grad: SharedSlice<'a, f32>,
-    tet_reach: SharedSlice<'a, f32>,
-    vertex_slack: SharedSlice<'a, f32>,
-    vertex_grad: SharedSlice<'a, f32>,
-    vertex_reach: SharedSlice<'a, f32>,
-    region_slack: SharedSlice<'a, f32>,
-    region_grad: SharedSlice<'a, f32>,
-    region_reach: SharedSlice<'a, f32>,
+    tet_radius: SharedSlice<'a, f32>,
+    vertex_radius: SharedSlice<'a, f32>,
+    region_radius: SharedSlice<'a, f32>,
     start: SharedSlice<'a, Vec3>,
 }
 
@@ -170,8 +151,8 @@ pub(crate) struct BoundsView<'a> {
 const BOUNDS_CHUNK: usize = 512;
 
 impl BoundsView<'_> {
-    /// The slack, gradient sum and reach of `tets` at `previews`, four tets at a time (see
-    /// `lanes`), the tail padded with collapsed tets.
+    /// The radius of `tets` at `previews` from their slack, gradient sum and reach, four tets
+    /// at a time (see `lanes`), the tail padded with collapsed tets.
     fn compute_tets(&self, mesh: &TetMesh, previews: SharedSlice<Vec3>, tets: Range<usize>) {
         let (all, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
         for start in tets.clone().step_by(LANES) {
@@ -192,42 +173,38 @@ impl BoundsView<'_> {
             let gb = e[2].cross(e[0]).scale(sixth);
             let gc = e[0].cross(e[1]).scale(sixth);
             let gd = -(ga + gb + gc);
-            let volume = e[0].dot(ga).to_array();
-            let grad = (ga.length_squared().sqrt()
+            let volume = e[0].dot(ga);
+            let grad = ga.length_squared().sqrt()
                 + gb.length_squared().sqrt()
                 + gc.length_squared().sqrt()
-                + gd.length_squared().sqrt())
-            .to_array();
+                + gd.length_squared().sqrt();
             let reach = e[0]
                 .length_squared()
                 .max(e[1].length_squared())
                 .max(e[2].length_squared())
-                .sqrt()
-                .to_array();
-            for l in 0..n {
-                let t = start + l;
-                let (volume, v0) = (volume[l], rest_volumes[t]);
-                let eps = CLAMP_FRACTION * v0;
-                // A tet below eps may lose half the slack over the pass, and must not get back
-                // above eps within the bound either: above eps, the exact rule would hold it
-                // there.
-                let slack = if volume >= eps {
-                    volume - eps
-                } else if volume.is_finite() {
-                    (0.5 * CLAMP_SLACK * v0).min(eps - volume)
-                } else {
-                    // A broken preview: no bound is safe; every region holding it walks.
-                    f32::NEG_INFINITY
-                };
-                self.tet_slack.set(t, slack);
-                self.tet_grad.set(t, grad[l]);
-                self.tet_reach.set(t, reach[l]);
+                .sqrt();
+            let v0 = f32x4::new(std::array::from_fn(|l| {
+                rest_volumes.get(start + l).copied().unwrap_or(0.0)
+            }));
+            let eps = f32x4::splat(CLAMP_FRACTION) * v0;
+            // A tet below eps may lose half the slack over the pass, and must not get back
+            // above eps within the bound either: above eps, the exact rule would hold it there.
+            let below = (f32x4::splat(0.5 * CLAMP_SLACK) * v0).min(eps - volume);
+            let slack = volume.cmp_ge(eps).blend(volume - eps, below);
+            // A broken preview: no bound is safe; every region holding it walks.
+            let radius = volume.is_finite().blend(
+                safe_radius(slack, grad, reach),
+                f32x4::splat(f32::NEG_INFINITY),
+            );
+            let radius = radius.to_array();
+            for (l, &radius) in radius.iter().enumerate().take(n) {
+                self.tet_radius.set(start + l, radius);
             }
         }
     }
 
-    /// The extremes of the tet bounds over each vertex's one-ring, for `vertices`; and their
-    /// start of the pass (`previews`, zero `drift`). Needs every tet's bounds.
+    /// The smallest tet radius of each vertex's one-ring, for `vertices`; and their start of
+    /// the pass (`previews`, zero `drift`). Needs every tet's radius.
     fn compute_vertices(
         &self,
         mesh: &TetMesh,
@@ -236,50 +213,35 @@ impl BoundsView<'_> {
         vertices: Range<usize>,
     ) {
         for v in vertices {
-            let (slack, grad, reach) = extremes(
-                mesh.one_ring(v),
-                [self.tet_slack, self.tet_grad, self.tet_reach],
-            );
-            self.vertex_slack.set(v, slack);
-            self.vertex_grad.set(v, grad);
-            self.vertex_reach.set(v, reach);
+            self.vertex_radius
+                .set(v, smallest(mesh.one_ring(v), self.tet_radius));
             self.start.set(v, previews.get(v));
             drift.set(v, 0.0);
         }
     }
 
-    /// The extremes of the vertex bounds over each region in `range`. A region is a union of
-    /// one-rings: a ring's tets and border tets are the one-rings of its ring vertices, a tet
-    /// and its neighbours the one-rings of its four vertices. Needs every vertex's bounds.
+    /// The smallest vertex radius of each region in `range`. A region is a union of one-rings:
+    /// a ring's tets and border tets are the one-rings of its ring vertices, a tet and its
+    /// neighbours the one-rings of its four vertices. Needs every vertex's radius.
     fn compute_regions(&self, mesh: &TetMesh, regions: ClampRegions, range: Range<usize>) {
         for r in range {
             let vertices: &[u32] = match regions {
                 ClampRegions::Rings => mesh.ring_vertices(r),
                 ClampRegions::Tets => &mesh.tets()[r],
             };
-            let (slack, grad, reach) = extremes(
-                vertices,
-                [self.vertex_slack, self.vertex_grad, self.vertex_reach],
-            );
-            self.region_slack.set(r, slack);
-            self.region_grad.set(r, grad);
-            self.region_reach.set(r, reach);
+            self.region_radius
+                .set(r, smallest(vertices, self.vertex_radius));
         }
     }
 }
 
-/// The smallest slack and the largest gradient sum and reach among `items` of
-/// `[slack, grad, reach]`: the bounds of their union.
+/// The smallest of `values` at `items`: the radius of their union.
 #[inline]
-fn extremes(items: &[u32], [slack, grad, reach]: [SharedSlice<f32>; 3]) -> (f32, f32, f32) {
-    let mut bounds = (f32::INFINITY, 0.0f32, 0.0f32);
-    for &i in items {
-        let i = i as usize;
-        bounds.0 = smaller(bounds.0, slack.get(i));
-        bounds.1 = larger(bounds.1, grad.get(i));
-        bounds.2 = larger(bounds.2, reach.get(i));
-    }
-    bounds
+fn smallest(items: &[u32], values: SharedSlice<f32>) -> f32 {
+    items
+        .iter()
+        .map(|&i| values.get(i as usize))
+        .fold(f32::INFINITY, smaller)
 }
 
 /// What the clamp bounds track while a pass runs, per particle.
@@ -365,9 +327,38 @@ fn volume_bound(delta: f32, l: f32) -> f32 {
 /// terms are at most those of [`volume_bound`]. Tighter than `volume_bound(2 m, l)` alone by a
 /// factor of about two to three for well-shaped tets (`grad` is about `0.6 l^2` for them), which
 /// lets that many more impulses skip the clamp walk.
+/// Four tets at a time.
 #[inline]
-fn drift_bound(m: f32, grad: f32, l: f32) -> f32 {
-    m * grad + 2.0 * l * m * m + (4.0 / 3.0) * m * m * m
+fn drift_bound(m: f32x4, grad: f32x4, l: f32x4) -> f32x4 {
+    m * grad + f32x4::splat(2.0) * l * m * m + f32x4::splat(4.0 / 3.0) * m * m * m
+}
+
+/// A little less than the largest `m` with `drift_bound(m, grad, l) <= slack`, four tets at a
+/// time: how far each particle of a tet with that slack, gradient sum and reach may move before
+/// the tet can reach its floor. Negative infinity without slack (nothing is safe).
+///
+/// Each term of `drift_bound` alone reaches `slack` no earlier than the sum, so the smallest of
+/// their roots is at or past the true one (for the cubic term a cruder point past it, to do
+/// without a cube root: only a tet collapsed to a point needs it), and so is a Newton step from
+/// there (the bound is convex); the bound is zero at zero, so scaling that point back by
+/// `slack / drift_bound(point)` (a chord) lands at or before the root: a few operations
+/// instead of solving the cubic, and within a tenth of it everywhere (tested). The margin
+/// covers `f32` rounding.
+#[inline]
+fn safe_radius(slack: f32x4, grad: f32x4, l: f32x4) -> f32x4 {
+    let (two, four) = (f32x4::splat(2.0), f32x4::splat(4.0));
+    let cubic_past = (f32x4::splat(0.75) * slack).max(f32x4::ONE);
+    let past = (slack / grad)
+        .min((slack / (two * l)).sqrt())
+        .min(cubic_past);
+    let bound = |m: f32x4| drift_bound(m, grad, l);
+    let slope = grad + four * l * past + four * past * past;
+    let past = past - (bound(past) - slack).max(f32x4::ZERO) / slope;
+    let chord = (slack / bound(past)).min(f32x4::ONE);
+    let radius = past * chord * f32x4::splat(1.0 - 1e-4);
+    slack
+        .cmp_gt(f32x4::ZERO)
+        .blend(radius, f32x4::splat(f32::NEG_INFINITY))
 }
 
 /// Working arrays of one ring impulse, sized for the mesh's largest one-ring so that steps do
@@ -1160,13 +1151,7 @@ impl PassView<'_> {
         whole_region: impl Iterator<Item = &'a u32>,
     ) -> f64 {
         let b = self.bounds;
-        if b.active
-            && drift_bound(
-                max_moved + step as f32 * largest_move,
-                b.region_grad.get(region),
-                b.region_reach.get(region),
-            ) < b.region_slack.get(region)
-        {
+        if b.active && max_moved + step as f32 * largest_move < b.region_radius.get(region) {
             counters.clamps_skipped += 1;
             return step;
         }
@@ -1207,9 +1192,8 @@ impl PassView<'_> {
                 .map(|&i| self.drift.get(i as usize) + step * self.move_len.get(i as usize))
                 .fold(0.0f32, larger);
             let v = v as usize;
-            if drift_bound(reach, b.vertex_grad.get(v), b.vertex_reach.get(v))
-                >= b.vertex_slack.get(v)
-            {
+            // A broken (NaN) preview clears nothing.
+            if reach >= b.vertex_radius.get(v) || reach.is_nan() {
                 unclear[count] = v as u32;
                 count += 1;
             }
@@ -1279,7 +1263,7 @@ impl PassView<'_> {
                         self.drift.get(i as usize) + step as f32 * self.move_len.get(i as usize)
                     })
                     .fold(0.0f32, larger);
-                if drift_bound(reach, b.tet_grad.get(t), b.tet_reach.get(t)) < b.tet_slack.get(t) {
+                if reach < b.tet_radius.get(t) {
                     continue;
                 }
             }
@@ -1604,7 +1588,8 @@ mod tests {
             let grad: f32 = g.iter().map(|g| g.length()).sum();
             let reach = (0..3).map(|k| (xp[k] - xp[3]).length()).fold(0.0, f32::max);
             let change = (signed_volume(&moved) - signed_volume(&xp)).abs();
-            let bound = drift_bound(m, grad, reach);
+            let [bound, ..] =
+                drift_bound(f32x4::splat(m), f32x4::splat(grad), f32x4::splat(reach)).to_array();
             // f32 rounding of the two volumes, relative to the tet's own size.
             let rounding = 1e-5 * (reach + m).powi(3);
             assert!(
@@ -1618,6 +1603,48 @@ mod tests {
         }
         // The bound is not vacuous: moves along the gradients reach it to first order.
         assert!(tightest > 0.9, "tightest ratio {tightest}");
+    }
+
+    /// A safe radius keeps `drift_bound` within the slack, and gives away little of it.
+    #[test]
+    fn safe_radius_is_within_the_slack_and_close_to_it() {
+        let mut seed = 7u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 40) as f64) / ((1u64 << 24) as f64)
+        };
+        let mut loosest = 1.0f64;
+        for case in 0..20_000 {
+            let l = 10f64.powf(4.0 * next() - 3.0);
+            // Gradient sums from flat to regular tets, slacks from a sliver to a whole tet.
+            let grad = l * l * [0.0, 0.01, 0.6, 2.0][case % 4] * next();
+            let slack = l * l * l * 10f64.powf(-6.0 * next());
+            let radius = safe_radius(
+                f32x4::splat(slack as f32),
+                f32x4::splat(grad as f32),
+                f32x4::splat(l as f32),
+            )
+            .to_array()[0] as f64;
+            let f = |m: f64| m * grad + 2.0 * l * m * m + 4.0 / 3.0 * m * m * m;
+            assert!(f(radius) <= slack, "case {case}: {} > {slack}", f(radius));
+            let (mut lo, mut hi) = (0.0, l + slack / grad.max(1e-30));
+            for _ in 0..200 {
+                let mid = 0.5 * (lo + hi);
+                if f(mid) <= slack { lo = mid } else { hi = mid }
+            }
+            loosest = loosest.min(radius / lo);
+        }
+        assert!(
+            loosest > 0.9,
+            "a radius of {loosest} of the largest safe one"
+        );
+        for slack in [0.0, -1.0, f32::NAN, f32::NEG_INFINITY] {
+            let one = f32x4::ONE;
+            let radius = safe_radius(f32x4::splat(slack), one, one).to_array()[0];
+            assert_eq!(radius, f32::NEG_INFINITY, "slack {slack}");
+        }
     }
 
     #[test]
