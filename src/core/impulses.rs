@@ -31,7 +31,7 @@
 use std::ops::Range;
 
 use glam::Vec3;
-use wide::{CmpGe, CmpGt, CmpLe, f32x4};
+use wide::{CmpGe, CmpGt, CmpLe, CmpNe, f32x4};
 
 use super::body::{SoftBodyState, StepCounters};
 use super::contacts::RigidSphereState;
@@ -808,8 +808,8 @@ impl PassView<'_> {
     /// positive root of `sum_t V_t(s) = sum_t V0_t`. Needs `refresh_previews` first.
     ///
     /// The ring's particles are gathered into [`RingWork`] first and its tets are computed four
-    /// at a time in SIMD lanes ([`Vec3x4`]), with the scalar code's operations in the scalar
-    /// code's order, so the result is bit for bit the same as one tet at a time.
+    /// at a time in SIMD lanes ([`Vec3x4`]), each lane with the scalar code's operations in the
+    /// scalar code's order; the polynomial is summed lane by lane, then over the lanes.
     fn ring_impulse(
         &self,
         worker: &mut PassWorker,
@@ -875,8 +875,8 @@ impl PassView<'_> {
         }
         // Each tet's directions `d_i = -w_i C_t grad_i`, summed per particle in ring order; the
         // stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
-        let mut stiffest = 0.0f32;
-        let mut any = false;
+        let mut stiffest = f32x4::ZERO;
+        let mut moves = f32x4::ZERO;
         // The centre is every tet's last corner: its direction is summed here, not in memory
         // (one add after another into the same element waited on each other's store).
         let mut centre = Vec3::ZERO;
@@ -888,6 +888,8 @@ impl PassView<'_> {
             let g = [ga, gb, gc, -(ga + gb + gc)];
             let mut stiffness = f32x4::ZERO;
             let mut d = [Vec3x4::ZERO; 4];
+            // Tets at their rest volume exactly (and unused lanes) take no part.
+            let counts = lanes.error.cmp_ne(f32x4::ZERO);
             for k in 0..4 {
                 let w = if k == 3 {
                     centre_inv_mass
@@ -896,25 +898,26 @@ impl PassView<'_> {
                 };
                 stiffness += w * g[k].length_squared();
                 d[k] = g[k].scale(-w * lanes.error);
+                let zero = f32x4::ZERO;
+                moves |= counts & (d[k].x.cmp_ne(zero) | d[k].y.cmp_ne(zero) | d[k].z.cmp_ne(zero));
             }
-            let (errors, stiffness) = (lanes.error.to_array(), stiffness.to_array());
+            stiffest = stiffest.max(counts & stiffness);
+            let errors = lanes.error.to_array();
             let d = d.map(Vec3x4::to_vecs);
             for l in 0..LANES {
                 if errors[l] == 0.0 {
                     continue;
                 }
-                stiffest = stiffest.max(stiffness[l]);
                 for k in 0..3 {
                     work.directions[tet_corners[l][k] as usize] += d[k][l];
-                    any |= d[k][l] != Vec3::ZERO;
                 }
                 centre += d[3][l];
-                any |= d[3][l] != Vec3::ZERO;
             }
         }
         work.directions[0] = centre;
+        let stiffest = stiffest.to_array().into_iter().fold(0.0f32, f32::max);
         let tet_step = 1.0 / stiffest as f64;
-        if !any {
+        if !moves.any() {
             return ImpulseOutcome::Skipped;
         }
         if self.any_touching {
@@ -922,8 +925,10 @@ impl PassView<'_> {
                 work.directions[k] = self.constrain_direction(i as usize, work.directions[k]);
             }
         }
-        // The ring's volume polynomial, summed tet by tet in ring order.
-        let mut poly: Cubic = [-rest, 0.0, 0.0, 0.0];
+        // The ring's volume polynomial, summed in `f64` lane by lane over the ring's groups of
+        // tets, then over the lanes (four short sums instead of one long chain of additions,
+        // each waiting for the last).
+        let mut sums = [[0.0f64; LANES]; 4];
         let sixth = 1.0 / 6.0;
         for (group, lanes) in work.tets[..groups].iter().enumerate() {
             let tet_corners: [[u16; 4]; LANES] =
@@ -937,19 +942,20 @@ impl PassView<'_> {
             let fbc = fb.cross(fc);
             let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
             let c3 = fa.dot(fbc);
-            let (volume, c1, c2, c3) = (
-                lanes.volume.to_array(),
-                c1.to_array(),
-                c2.to_array(),
-                c3.to_array(),
-            );
-            for l in 0..LANES.min(ring.len() - LANES * group) {
-                poly[0] += volume[l] as f64;
-                poly[1] += c1[l] as f64;
-                poly[2] += c2[l] as f64 * sixth;
-                poly[3] += c3[l] as f64 * sixth;
+            // Unused lanes hold collapsed tets: zero volume and coefficients.
+            for (sum, c) in sums.iter_mut().zip([lanes.volume, c1, c2, c3]) {
+                for (s, c) in sum.iter_mut().zip(c.to_array()) {
+                    *s += c as f64;
+                }
             }
         }
+        let total = |k: usize| sums[k].iter().sum::<f64>();
+        let poly: Cubic = [
+            total(0) - rest,
+            total(1),
+            total(2) * sixth,
+            total(3) * sixth,
+        ];
         let Some(root) = monotone_root(&poly) else {
             worker.counters.rings_without_root += 1;
             return ImpulseOutcome::NoRoot;
