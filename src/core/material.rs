@@ -76,6 +76,15 @@ pub struct ImpulseSettings {
     /// every step, however small its error; most of them are within a hundredth of a percent
     /// once a body has settled, and their impulses would only cost time. Not a limit on the
     /// total error: a tet this close contributes at most this fraction of its volume to it.
+    ///
+    /// The default, 0.3 %, is a third of the 1 % the method is held to. Measured in the
+    /// paper's scenes (`paper_figures`) against 0.1 %: the same peak errors (all under 1 %,
+    /// the creature's landing 0.90 % against 0.88 %); the mean per-tet error of the bar, the
+    /// sphere on it and the cube up from 0.02 / 0.07 / 0.07 % to 0.07 / 0.10 / 0.11 % (the
+    /// creature's and the plastic block's, 0.34 and 0.70 %, come from their deformation and
+    /// hardly change); the soft cube's step 1.58 -> 1.29 ms, the sphere on the bar's 0.86 ->
+    /// 0.75 ms (the creature's, whose impulses come from its landing, about the same). Lower
+    /// it where single tets must stay closer to their volume.
     pub tolerance: f32,
 }
 
@@ -86,7 +95,7 @@ impl ImpulseSettings {
         per_tet: true,
         gamma: 0.125,
         neighbour_clamp: true,
-        tolerance: 1e-3,
+        tolerance: 3e-3,
     };
 }
 
