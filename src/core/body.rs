@@ -283,6 +283,7 @@ impl SoftBodyState {
     pub fn begin_step(&mut self) {
         self.counters = StepCounters::default();
         self.previous_positions.copy_from_slice(&self.positions);
+        self.clamp_bounds.taken_this_step = false;
         for &i in &self.touching {
             self.contact_normals[i as usize] = Vec3::ZERO;
             self.contact_sphere[i as usize] = u32::MAX;

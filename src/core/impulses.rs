@@ -96,38 +96,48 @@ pub(crate) struct ClampBounds {
     pub(crate) active: bool,
     /// Never use the bounds (to compare against the exact walk in tests).
     pub(crate) disabled: bool,
+    /// Whether the bounds were taken in this step (by its one-ring pass), for the per-tet
+    /// pass to go on from (see [`SoftBodyState::per_tet_pass_on`]); cleared by `begin_step`.
+    pub(crate) taken_this_step: bool,
+    /// Whether the next bounds taken (by a one-ring pass) are to cover the tets' regions too,
+    /// for the per-tet pass after it.
+    keep_for_tets: bool,
     tet_radius: Vec<f32>,
     vertex_radius: Vec<f32>,
-    region_radius: Vec<f32>,
-    /// Previews at the start of the pass: a particle's drift is its distance from here.
+    /// The radius of each vertex's ring region ([`ClampRegions::Rings`]).
+    ring_region_radius: Vec<f32>,
+    /// The radius of each tet's region ([`ClampRegions::Tets`]).
+    tet_region_radius: Vec<f32>,
+    /// Previews when the bounds were taken: a particle's drift is its distance from here.
     start: Vec<Vec3>,
 }
 
 impl ClampBounds {
     /// The arrays, for the jobs of a pass to fill and then read (see [`BoundsView`]).
-    fn view(&mut self) -> BoundsView<'_> {
+    fn view(&mut self, regions: ClampRegions) -> BoundsView<'_> {
         BoundsView {
             active: self.active,
+            regions,
             tet_radius: SharedSlice::new(&mut self.tet_radius),
             vertex_radius: SharedSlice::new(&mut self.vertex_radius),
-            region_radius: SharedSlice::new(&mut self.region_radius),
+            ring_region_radius: SharedSlice::new(&mut self.ring_region_radius),
+            tet_region_radius: SharedSlice::new(&mut self.tet_region_radius),
             start: SharedSlice::new(&mut self.start),
         }
     }
 
-    /// Sizes the arrays for a pass over `mesh` with `regions` (allocates only the first time).
-    fn reserve(&mut self, mesh: &TetMesh, regions: ClampRegions, motion: &mut ClampMotion) {
+    /// Sizes the arrays for passes over `mesh` in `blocks` tasks (allocates only the first
+    /// time).
+    fn reserve(&mut self, mesh: &TetMesh, blocks: usize, motion: &mut ClampMotion) {
         let (n, tets) = (mesh.vertex_count(), mesh.tet_count());
-        let count = match regions {
-            ClampRegions::Rings => n,
-            ClampRegions::Tets => tets,
-        };
         for (array, len) in [
             (&mut self.tet_radius, tets),
             (&mut self.vertex_radius, n),
-            (&mut self.region_radius, count),
+            (&mut self.ring_region_radius, n),
+            (&mut self.tet_region_radius, tets),
             (&mut motion.drift, n),
             (&mut motion.move_len, n),
+            (&mut motion.block_drift, blocks),
         ] {
             array.resize(len, 0.0);
         }
@@ -141,9 +151,12 @@ impl ClampBounds {
 #[derive(Clone, Copy)]
 pub(crate) struct BoundsView<'a> {
     active: bool,
+    /// The regions of the pass's impulses.
+    regions: ClampRegions,
     tet_radius: SharedSlice<'a, f32>,
     vertex_radius: SharedSlice<'a, f32>,
-    region_radius: SharedSlice<'a, f32>,
+    ring_region_radius: SharedSlice<'a, f32>,
+    tet_region_radius: SharedSlice<'a, f32>,
     start: SharedSlice<'a, Vec3>,
 }
 
@@ -220,18 +233,45 @@ impl BoundsView<'_> {
         }
     }
 
-    /// The smallest vertex radius of each region in `range`. A region is a union of one-rings:
-    /// a ring's tets and border tets are the one-rings of its ring vertices, a tet and its
-    /// neighbours the one-rings of its four vertices. Needs every vertex's radius.
+    /// The smallest vertex radius of each region of kind `regions` in `range`. A region is a
+    /// union of one-rings: a ring's tets and border tets are the one-rings of its ring
+    /// vertices, a tet and its neighbours the one-rings of its four vertices. Needs every
+    /// vertex's radius.
     fn compute_regions(&self, mesh: &TetMesh, regions: ClampRegions, range: Range<usize>) {
         for r in range {
-            let vertices: &[u32] = match regions {
-                ClampRegions::Rings => mesh.ring_vertices(r),
-                ClampRegions::Tets => &mesh.tets()[r],
+            let (vertices, radius): (&[u32], _) = match regions {
+                ClampRegions::Rings => (mesh.ring_vertices(r), self.ring_region_radius),
+                ClampRegions::Tets => (&mesh.tets()[r], self.tet_region_radius),
             };
-            self.region_radius
-                .set(r, smallest(vertices, self.vertex_radius));
+            radius.set(r, smallest(vertices, self.vertex_radius));
         }
+    }
+
+    /// The radius of the pass's region `r`.
+    #[inline]
+    fn region_radius(&self, r: usize) -> f32 {
+        match self.regions {
+            ClampRegions::Rings => self.ring_region_radius.get(r),
+            ClampRegions::Tets => self.tet_region_radius.get(r),
+        }
+    }
+
+    /// For a pass that goes on from bounds taken earlier: the drift of the `vertices` of one
+    /// block from their previews, and the largest of them.
+    fn carry_drift(
+        &self,
+        previews: SharedSlice<Vec3>,
+        drift: SharedSlice<f32>,
+        vertices: &[u32],
+    ) -> f32 {
+        let mut largest = 0.0f32;
+        for &v in vertices {
+            let v = v as usize;
+            let d = (previews.get(v) - self.start.get(v)).length();
+            drift.set(v, d);
+            largest = larger(largest, d);
+        }
+        largest
     }
 }
 
@@ -257,6 +297,9 @@ pub(crate) struct ClampMotion {
     /// [`PassView::clamp_unclear`]), each such vertex's place in that list, from 1 (zero for
     /// every other particle): a tet holding a vertex listed earlier was already looked at.
     unclear_rank: Vec<u32>,
+    /// For a pass that goes on from bounds taken earlier, the largest drift among each block's
+    /// vertices at its start.
+    block_drift: Vec<f32>,
 }
 
 /// What one block's task owns during a pass (see [`super::parallel`]): its working arrays, its
@@ -474,6 +517,8 @@ impl SoftBodyState {
         self.refresh_previews(h);
         let regions = settings.neighbour_clamp.then_some(ClampRegions::Rings);
         let mesh = self.mesh.clone();
+        // The per-tet pass, if it runs, goes on from this pass's clamp bounds.
+        self.clamp_bounds.keep_for_tets = settings.per_tet && settings.gamma != 0.0;
         self.run_blocks(
             h,
             spheres,
@@ -556,47 +601,70 @@ impl SoftBodyState {
             worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
         }
         let clamp_regions = clamp_regions.filter(|_| !self.clamp_bounds.disabled);
-        if let Some(regions) = clamp_regions {
+        // A per-tet pass after its step's one-ring pass goes on from the bounds that pass took
+        // (they hold as long as drifts are measured from where they were taken): it only
+        // measures each particle's drift again. Taking them costs about as much as the
+        // per-tet pass's impulses in the soft cube.
+        let carry = clamp_regions == Some(ClampRegions::Tets) && self.clamp_bounds.taken_this_step;
+        let blocks = self.mesh.blocks();
+        if clamp_regions.is_some() {
             self.clamp_bounds
-                .reserve(&self.mesh, regions, &mut self.clamp_motion);
+                .reserve(&self.mesh, blocks.count(), &mut self.clamp_motion);
             self.clamp_bounds.active = true;
         }
+        let take_tet_regions =
+            clamp_regions == Some(ClampRegions::Tets) || self.clamp_bounds.keep_for_tets;
+        self.clamp_bounds.keep_for_tets = false;
         {
             let mesh = &*self.mesh;
             let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
             let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
             let any_touching = !self.touching.is_empty();
-            let bounds = self.clamp_bounds.view();
+            let bounds = self
+                .clamp_bounds
+                .view(clamp_regions.unwrap_or(ClampRegions::Rings));
             let velocities = SharedSlice::new(&mut self.velocities);
             let previews = SharedSlice::new(&mut self.previews);
             let scratch = SharedSlice::new(&mut self.scratch);
             let drift = SharedSlice::new(&mut self.clamp_motion.drift);
             let move_len = SharedSlice::new(&mut self.clamp_motion.move_len);
             let unclear_rank = SharedSlice::new(&mut self.clamp_motion.unclear_rank);
+            let block_drift = SharedSlice::new(&mut self.clamp_motion.block_drift);
             let workers = SharedSlice::new(&mut self.pass_workers);
             let waits_for = &mesh.blocks().waits_for;
             let count = items.len();
             // The clamp bounds are computed first, in chunks: the tets', then the vertices'
-            // (which need all tets'), then the regions' (which need all vertices'); threads
-            // that join late (waking one takes longer than a chunk) find the work going.
+            // (which need all tets'), then the regions' (which need all vertices'): the rings'
+            // for a one-ring pass, the tets' for a per-tet pass or to keep; threads that join
+            // late (waking one takes longer than a chunk) find the work going. A pass going on
+            // from bounds taken earlier only measures the drifts, block by block.
             let (n, tet_count) = (mesh.vertex_count(), mesh.tet_count());
-            let region_count = match clamp_regions {
-                Some(ClampRegions::Rings) => n,
-                Some(ClampRegions::Tets) => tet_count,
-                None => 0,
+            let fresh = clamp_regions.is_some() && !carry;
+            let chunks = |items: usize| {
+                if fresh {
+                    items.div_ceil(BOUNDS_CHUNK)
+                } else {
+                    0
+                }
             };
-            let chunks = |items: usize| match clamp_regions {
-                Some(_) => items.div_ceil(BOUNDS_CHUNK),
-                None => 0,
+            let ring_chunks = match clamp_regions {
+                Some(ClampRegions::Rings) => chunks(n),
+                _ => 0,
             };
-            let chunk_phase = |items: usize| Phase {
-                tasks: chunks(items),
-                order: None,
+            let tet_chunks = if take_tet_regions {
+                chunks(tet_count)
+            } else {
+                0
             };
+            let chunk_phase = |tasks: usize| Phase { tasks, order: None };
             let phases = [
-                chunk_phase(tet_count),
-                chunk_phase(n),
-                chunk_phase(region_count),
+                chunk_phase(chunks(tet_count)),
+                chunk_phase(chunks(n)),
+                chunk_phase(if carry {
+                    count
+                } else {
+                    ring_chunks + tet_chunks
+                }),
                 Phase {
                     tasks: count,
                     order: Some((waits_for, &self.block_done[..count])),
@@ -605,11 +673,22 @@ impl SoftBodyState {
             run_phases(parallel, &phases, &|phase, task| {
                 let range =
                     |items: usize| BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(items);
-                match (phase, clamp_regions) {
-                    (0, _) => bounds.compute_tets(mesh, previews, range(tet_count)),
-                    (1, _) => bounds.compute_vertices(mesh, previews, drift, range(n)),
-                    (2, Some(regions)) => {
-                        bounds.compute_regions(mesh, regions, range(region_count))
+                match phase {
+                    0 => bounds.compute_tets(mesh, previews, range(tet_count)),
+                    1 => bounds.compute_vertices(mesh, previews, drift, range(n)),
+                    2 if carry => {
+                        let vertices = blocks.vertices.row(task);
+                        block_drift.set(task, bounds.carry_drift(previews, drift, vertices));
+                    }
+                    2 => {
+                        if task < ring_chunks {
+                            bounds.compute_regions(mesh, ClampRegions::Rings, range(n));
+                        } else {
+                            let task = task - ring_chunks;
+                            let range =
+                                BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(tet_count);
+                            bounds.compute_regions(mesh, ClampRegions::Tets, range);
+                        }
                     }
                     _ => {
                         let view = PassView {
@@ -630,8 +709,16 @@ impl SoftBodyState {
                         };
                         // The particles this task reads were last moved by the tasks it
                         // waits for (done by now): their largest drift bounds those
-                        // particles' drift.
+                        // particles' drift; going on from earlier bounds, so does the largest
+                        // drift at the start in this block and its neighbours (a block's
+                        // impulses read no further).
                         let mut start_drift = 0.0f32;
+                        if carry {
+                            start_drift = block_drift.get(task);
+                            for &near in blocks.neighbours.row(task) {
+                                start_drift = larger(start_drift, block_drift.get(near as usize));
+                            }
+                        }
                         for &earlier in waits_for.row(task) {
                             // Safety: that task is done; nothing writes its worker now.
                             let moved = unsafe { workers.get_mut(earlier as usize) }.max_moved;
@@ -646,6 +733,9 @@ impl SoftBodyState {
             });
         }
         self.clamp_bounds.active = false;
+        if clamp_regions.is_some() && !carry {
+            self.clamp_bounds.taken_this_step = take_tet_regions;
+        }
         let c = &mut self.counters;
         for worker in &self.pass_workers {
             let w = &worker.counters;
@@ -725,7 +815,7 @@ impl SoftBodyState {
             contact_kept: &self.contact_kept,
             contact_sphere: &self.contact_sphere,
             any_touching: !self.touching.is_empty(),
-            bounds: self.clamp_bounds.view(),
+            bounds: self.clamp_bounds.view(ClampRegions::Rings),
             velocities: SharedSlice::new(&mut self.velocities),
             previews: SharedSlice::new(&mut self.previews),
             scratch: SharedSlice::new(&mut self.scratch),
@@ -1157,7 +1247,7 @@ impl PassView<'_> {
         whole_region: impl Iterator<Item = &'a u32>,
     ) -> f64 {
         let b = self.bounds;
-        if b.active && max_moved + step as f32 * largest_move < b.region_radius.get(region) {
+        if b.active && max_moved + step as f32 * largest_move < b.region_radius(region) {
             counters.clamps_skipped += 1;
             return step;
         }
@@ -1662,6 +1752,11 @@ mod tests {
             for body in [&mut fast, &mut exact] {
                 body.begin_step();
                 body.one_ring_pass(H, &mut []);
+                // The per-tet pass goes on from the ring pass's bounds: velocities changed in
+                // between must count in its drifts.
+                for v in body.velocities.iter_mut().step_by(7) {
+                    *v += Vec3::new(0.3, -1.0, 0.2) * strength;
+                }
                 body.per_tet_pass(H, &mut []);
             }
             assert_eq!(fast.velocities, exact.velocities, "strength {strength}");
@@ -1670,6 +1765,42 @@ mod tests {
                 assert!(fast.counters().clamps_skipped > 0);
             }
         }
+    }
+
+    /// The per-tet pass goes on from the clamp bounds its step's one-ring pass took: with
+    /// velocities changed in between, and impulses big enough (`gamma = 1`) to be clamped, it
+    /// still clamps exactly as the walk without bounds does.
+    #[test]
+    fn the_per_tet_pass_going_on_from_the_ring_passs_bounds_changes_nothing() {
+        let mut clamped = 0;
+        for strength in [0.3, 3.0, 4.0, 6.0] {
+            let mut fast = shaken_body(strength);
+            let mut material = *fast.material();
+            material.method = VolumeMethod::Impulses(ImpulseSettings {
+                gamma: 1.0,
+                ..ImpulseSettings::PAPER
+            });
+            fast.set_material(material).unwrap();
+            let mut exact = fast.clone();
+            exact.clamp_bounds.disabled = true;
+            for body in [&mut fast, &mut exact] {
+                body.begin_step();
+                body.one_ring_pass(H, &mut []);
+                for v in body.velocities.iter_mut().step_by(5) {
+                    *v += Vec3::new(0.3, -1.0, 0.2) * strength;
+                }
+                body.per_tet_pass(H, &mut []);
+            }
+            assert_eq!(fast.velocities, exact.velocities, "strength {strength}");
+            if strength < 1.0 {
+                assert!(
+                    fast.counters().clamps_skipped > 0,
+                    "the bounds were never used"
+                );
+            }
+            clamped += exact.counters().tets_clamped;
+        }
+        assert!(clamped > 0, "no per-tet impulse was clamped");
     }
 
     #[test]

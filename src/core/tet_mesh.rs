@@ -179,6 +179,9 @@ pub struct Blocks {
     /// For each task, the earlier tasks it must wait for: its neighbouring blocks of earlier
     /// colours.
     pub waits_for: Csr,
+    /// For each task, its neighbouring blocks (of earlier and later colours): the only ones
+    /// whose particles its jobs read.
+    pub neighbours: Csr,
     /// Layers per block, in each of the two layer counts.
     pub width: [u32; 2],
 }
@@ -383,12 +386,18 @@ impl Blocks {
                     .map(move |t| (task as u32, t))
             })
             .collect();
+        let mut neighbour_pairs: Vec<(u32, u32)> = wait_pairs
+            .iter()
+            .flat_map(|&(late, early)| [(late, early), (early, late)])
+            .collect();
+        neighbour_pairs.sort_unstable();
         Blocks {
             vertices: Csr::from_pairs(count, &vertex_pairs),
             tets: block_tets,
             tet_bundles: Csr::from_pairs(count, &bundle_pairs),
             edges: Csr::from_pairs(count, &edge_pairs),
             waits_for: Csr::from_pairs(count, &wait_pairs),
+            neighbours: Csr::from_pairs(count, &neighbour_pairs),
             width,
         }
     }
@@ -862,6 +871,34 @@ mod tests {
             assert!(tasks_are_ordered(mesh, &blocks.vertices, waits, ring));
             assert!(tasks_are_ordered(mesh, &blocks.tets, waits, tet));
             assert!(tasks_are_ordered(mesh, &blocks.edges, waits, edge));
+            // A task's jobs touch only the vertices of its own block and its neighbours.
+            let mut block_of = vec![u32::MAX; mesh.vertex_count()];
+            for task in 0..blocks.count() {
+                for &v in blocks.vertices.row(task) {
+                    block_of[v as usize] = task as u32;
+                }
+            }
+            for (items, access) in [
+                (
+                    &blocks.vertices,
+                    &ring as &dyn Fn(u32) -> (Vec<u32>, Vec<u32>),
+                ),
+                (&blocks.tets, &tet),
+            ] {
+                for task in 0..blocks.count() {
+                    for &item in items.row(task) {
+                        let (written, read) = access(item);
+                        for v in written.into_iter().chain(read) {
+                            let owner = block_of[v as usize];
+                            assert!(
+                                owner == task as u32
+                                    || blocks.neighbours.row(task).contains(&owner),
+                                "task {task} touches vertex {v} of block {owner}"
+                            );
+                        }
+                    }
+                }
+            }
             // Tasks only wait for earlier ones, and some run without waiting at all.
             for task in 0..blocks.count() {
                 assert!(waits.row(task).iter().all(|&w| (w as usize) < task));
