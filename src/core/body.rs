@@ -90,6 +90,9 @@ pub struct SoftBodyState {
     pub(crate) spring_rest: Vec<f32>,
     /// Plastic strain `e_p` of each spring.
     plastic_strain: Vec<f32>,
+    /// Each spring's unit direction this step (zero for a spring of no length), from its force
+    /// to its damper: one root and one division per spring instead of two.
+    spring_directions: Vec<Vec3>,
     pub(crate) material: SoftBodyMaterial,
     /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
     /// passes. Kept zero between uses so that the passes never clear the whole array.
@@ -142,6 +145,7 @@ impl SoftBodyState {
             kinematic: Vec::with_capacity(n),
             spring_rest: spring_rest0.clone(),
             plastic_strain: vec![0.0; spring_rest0.len()],
+            spring_directions: vec![Vec3::ZERO; spring_rest0.len()],
             spring_rest0,
             material,
             scratch: vec![Vec3::ZERO; n],
@@ -313,14 +317,8 @@ impl SoftBodyState {
     pub(crate) fn damp_springs(&mut self, h: f32, damping: f32) {
         let velocities = SharedSlice::new(&mut self.velocities);
         for &edge in self.mesh.edges() {
-            damp_spring(
-                edge,
-                &self.positions,
-                &self.inv_masses,
-                velocities,
-                h,
-                damping,
-            );
+            let dir = spring_direction(&self.positions, edge).0;
+            damp_spring(edge, dir, &self.inv_masses, velocities, h, damping);
         }
     }
 
@@ -361,6 +359,7 @@ impl SoftBodyState {
         );
         let forces = SharedSlice::new(&mut self.scratch);
         let velocities = SharedSlice::new(&mut self.velocities);
+        let directions = SharedSlice::new(&mut self.spring_directions);
         let n = x.len();
         let chunks = n.div_ceil(PARTICLE_CHUNK);
         let (springs_done, dampers_done) = self.block_done.split_at(count);
@@ -388,14 +387,14 @@ impl SoftBodyState {
                 0 => {
                     for &e in blocks.edges.row(task) {
                         let e = e as usize;
-                        let [i, j] = mesh.edges()[e].map(|i| i as usize);
-                        let delta = x[j] - x[i];
-                        let length = delta.length();
+                        let edge = mesh.edges()[e];
+                        let (dir, length) = spring_direction(x, edge);
+                        let [i, j] = edge.map(|i| i as usize);
                         let rest = spring_rest[e];
+                        directions.set(e, dir);
                         if length <= f32::EPSILON * rest {
                             continue;
                         }
-                        let dir = delta / length;
                         let f = dir * (k_d * (length - rest) / (rest * rest));
                         forces.set(i, forces.get(i) + f);
                         forces.set(j, forces.get(j) - f);
@@ -427,8 +426,8 @@ impl SoftBodyState {
                 }
                 2 => {
                     for &e in blocks.edges.row(task) {
-                        let edge = mesh.edges()[e as usize];
-                        damp_spring(edge, x, inv_masses, velocities, h, damping);
+                        let (edge, dir) = (mesh.edges()[e as usize], directions.get(e as usize));
+                        damp_spring(edge, dir, inv_masses, velocities, h, damping);
                     }
                 }
                 _ => {
@@ -620,6 +619,18 @@ impl SoftBodyState {
     }
 }
 
+/// The unit direction from `i` to `j` at `x` (zero if they coincide) and their distance.
+#[inline]
+fn spring_direction(x: &[Vec3], [i, j]: [u32; 2]) -> (Vec3, f32) {
+    let delta = x[j as usize] - x[i as usize];
+    let length = delta.length();
+    if length > f32::EPSILON {
+        (delta / length, length)
+    } else {
+        (Vec3::ZERO, length)
+    }
+}
+
 /// Spring damping, solved implicitly one spring at a time: the damper of each spring
 /// removes the fraction `c h (w_i + w_j) / (1 + c h (w_i + w_j))` of the relative velocity
 /// along it, which is the exact implicit step of that damper alone. An explicit damping
@@ -628,7 +639,7 @@ impl SoftBodyState {
 /// momentum.
 fn damp_spring(
     [i, j]: [u32; 2],
-    x: &[Vec3],
+    dir: Vec3,
     inv_masses: &[f32],
     velocities: SharedSlice<Vec3>,
     h: f32,
@@ -636,15 +647,10 @@ fn damp_spring(
 ) {
     let (i, j) = (i as usize, j as usize);
     let w_sum = inv_masses[i] + inv_masses[j];
-    if w_sum == 0.0 {
+    // A spring of no length has no direction to damp along.
+    if w_sum == 0.0 || dir == Vec3::ZERO {
         return;
     }
-    let delta = x[j] - x[i];
-    let length = delta.length();
-    if length <= f32::EPSILON {
-        return;
-    }
-    let dir = delta / length;
     let relative = (velocities.get(j) - velocities.get(i)).dot(dir);
     let k = damping * h;
     let impulse = relative * k / (1.0 + k * w_sum);
