@@ -2,7 +2,9 @@
 //! directions as a cubic in the step length (the paper's Eq. for `V(k_V)`).
 
 use glam::Vec3;
+use wide::f32x4;
 
+use super::lanes::Vec3x4;
 use super::roots::Cubic;
 
 /// `1 / 6`, multiplied by rather than divided by: a division costs several multiplications in
@@ -68,42 +70,23 @@ pub fn volume_polynomial(p: &[Vec3; 4], d: &[Vec3; 4]) -> Cubic {
     ]
 }
 
-/// [`volume_polynomial`] for a tet whose volume `volume` and gradients `g` at `p` are already
-/// known: the constant and linear coefficients then cost a few dot products, and only the
-/// quadratic and cubic ones need cross products. The volume passes compute the gradients anyway
-/// (for the directions), so this saves them more than half the work of each polynomial.
-#[inline]
-pub fn volume_polynomial_with_gradients(
-    p: &[Vec3; 4],
-    volume: f32,
-    g: &[Vec3; 4],
-    d: &[Vec3; 4],
-) -> Cubic {
-    volume_polynomial_with_edges(&[p[0] - p[3], p[1] - p[3], p[2] - p[3]], volume, g, d)
-}
-
-/// [`volume_polynomial_with_gradients`] given the tet's edge vectors `p_i - p_d` (i = a, b, c)
-/// instead of its positions, for callers that kept them.
-#[inline]
-pub fn volume_polynomial_with_edges(
-    e: &[Vec3; 3],
-    volume: f32,
-    g: &[Vec3; 4],
-    d: &[Vec3; 4],
-) -> Cubic {
-    let [ea, eb, ec] = *e;
-    let (fa, fb, fc) = (d[0] - d[3], d[1] - d[3], d[2] - d[3]);
-    let c1 = g[0].dot(fa) + g[1].dot(fb) + g[2].dot(fc);
+/// The linear, quadratic and cubic coefficients of [`volume_polynomial`], times 1, 6 and 6,
+/// for four tets in SIMD lanes whose edge vectors `e = p_i - p_d` and gradients `g` of a, b and
+/// c are already known, moving along edge directions `f = d_i - d_d`: the linear coefficient
+/// then costs three dot products, and only the others need cross products. The volume passes
+/// compute the edges and gradients anyway (for the volumes and directions), so this saves them
+/// more than half the work of each polynomial. The constant coefficient is the volume.
+#[inline(always)]
+pub fn volume_polynomial_lanes(
+    [ea, eb, ec]: [Vec3x4; 3],
+    [ga, gb, gc]: [Vec3x4; 3],
+    [fa, fb, fc]: [Vec3x4; 3],
+) -> [f32x4; 3] {
+    let c1 = ga.dot(fa) + gb.dot(fb) + gc.dot(fc);
     let fbc = fb.cross(fc);
     let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
     let c3 = fa.dot(fbc);
-    let sixth = 1.0 / 6.0;
-    [
-        volume as f64,
-        c1 as f64,
-        c2 as f64 * sixth,
-        c3 as f64 * sixth,
-    ]
+    [c1, c2, c3]
 }
 
 #[cfg(test)]
@@ -158,8 +141,15 @@ mod tests {
                 *v = Vec3::ZERO;
             }
             let c = volume_polynomial(&p, &d);
-            let from_gradients =
-                volume_polynomial_with_gradients(&p, signed_volume(&p), &volume_gradients(&p), &d);
+            let lanes = |v: [Vec3; 3]| v.map(Vec3x4::splat);
+            let g = volume_gradients(&p);
+            let [c1, c2, c3] = volume_polynomial_lanes(
+                lanes([p[0] - p[3], p[1] - p[3], p[2] - p[3]]),
+                lanes([g[0], g[1], g[2]]),
+                lanes([d[0] - d[3], d[1] - d[3], d[2] - d[3]]),
+            )
+            .map(|c| c.to_array()[0] as f64);
+            let from_gradients = [signed_volume(&p) as f64, c1, c2 / 6.0, c3 / 6.0];
             for (a, b) in c.iter().zip(&from_gradients) {
                 assert!(
                     (a - b).abs() < 1e-5 * (1.0 + a.abs()),

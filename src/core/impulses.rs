@@ -35,7 +35,7 @@ use wide::{CmpGe, CmpGt, CmpLe, CmpNe, f32x4};
 
 use super::body::{SoftBodyState, StepCounters};
 use super::contacts::RigidSphereState;
-use super::geometry::{SIXTH, signed_volume, volume_polynomial};
+use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_lanes};
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
@@ -1026,12 +1026,7 @@ impl PassView<'_> {
             let dir = |k: usize| gather(&work.directions, &tet_corners, k);
             let dd = Vec3x4::splat(work.directions[0]);
             let (fa, fb, fc) = (dir(0) - dd, dir(1) - dd, dir(2) - dd);
-            let [ga, gb, gc] = lanes.gradients;
-            let [ea, eb, ec] = lanes.edges;
-            let c1 = ga.dot(fa) + gb.dot(fb) + gc.dot(fc);
-            let fbc = fb.cross(fc);
-            let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
-            let c3 = fa.dot(fbc);
+            let [c1, c2, c3] = volume_polynomial_lanes(lanes.edges, lanes.gradients, [fa, fb, fc]);
             // Unused lanes hold collapsed tets: zero volume and coefficients.
             for (sum, c) in sums.iter_mut().zip([lanes.volume, c1, c2, c3]) {
                 for (s, c) in sum.iter_mut().zip(c.to_array()) {
@@ -1156,12 +1151,8 @@ impl PassView<'_> {
                 *dk = *dk - normal.scale(into * (f32x4::ONE - kept));
             }
         }
-        // The volume polynomial (see `volume_polynomial_with_edges`).
-        let (fa, fb, fc) = (d[0] - d[3], d[1] - d[3], d[2] - d[3]);
-        let c1 = ga.dot(fa) + gb.dot(fb) + gc.dot(fc);
-        let fbc = fb.cross(fc);
-        let c2 = ea.dot(fbc) + eb.dot(fc.cross(fa)) + ec.dot(fa.cross(fb));
-        let c3 = fa.dot(fbc);
+        let f = [d[0] - d[3], d[1] - d[3], d[2] - d[3]];
+        let [c1, c2, c3] = volume_polynomial_lanes([ea, eb, ec], [ga, gb, gc], f);
         let (volume, v0) = (volume.to_array(), v0.to_array());
         let (c1, c2, c3) = (c1.to_array(), c2.to_array(), c3.to_array());
         let d = d.map(Vec3x4::to_vecs);
@@ -1743,6 +1734,18 @@ mod tests {
         }
     }
 
+    /// A step's one-ring and per-tet passes with every `every`-th particle pushed between them
+    /// by `strength`: the per-tet pass goes on from the ring pass's bounds, so velocities
+    /// changed in between must count in its drifts.
+    fn passes_with_a_push_between(body: &mut SoftBodyState, every: usize, strength: f32) {
+        body.begin_step();
+        body.one_ring_pass(H, &mut []);
+        for v in body.velocities.iter_mut().step_by(every) {
+            *v += Vec3::new(0.3, -1.0, 0.2) * strength;
+        }
+        body.per_tet_pass(H, &mut []);
+    }
+
     #[test]
     fn the_clamp_shortcut_changes_nothing() {
         for strength in [0.05, 0.5, 4.0] {
@@ -1750,14 +1753,7 @@ mod tests {
             let mut exact = shaken_body(strength);
             exact.clamp_bounds.disabled = true;
             for body in [&mut fast, &mut exact] {
-                body.begin_step();
-                body.one_ring_pass(H, &mut []);
-                // The per-tet pass goes on from the ring pass's bounds: velocities changed in
-                // between must count in its drifts.
-                for v in body.velocities.iter_mut().step_by(7) {
-                    *v += Vec3::new(0.3, -1.0, 0.2) * strength;
-                }
-                body.per_tet_pass(H, &mut []);
+                passes_with_a_push_between(body, 7, strength);
             }
             assert_eq!(fast.velocities, exact.velocities, "strength {strength}");
             assert_eq!(exact.counters().clamps_skipped, 0);
@@ -1784,12 +1780,7 @@ mod tests {
             let mut exact = fast.clone();
             exact.clamp_bounds.disabled = true;
             for body in [&mut fast, &mut exact] {
-                body.begin_step();
-                body.one_ring_pass(H, &mut []);
-                for v in body.velocities.iter_mut().step_by(5) {
-                    *v += Vec3::new(0.3, -1.0, 0.2) * strength;
-                }
-                body.per_tet_pass(H, &mut []);
+                passes_with_a_push_between(body, 5, strength);
             }
             assert_eq!(fast.velocities, exact.velocities, "strength {strength}");
             if strength < 1.0 {
