@@ -228,3 +228,55 @@ impl RigidSphereState {
         self.position += h * self.velocity;
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::Quat;
+
+    /// The half-space shortcut answers what parry's point projection answers, for a ground
+    /// turned and moved away from the origin.
+    #[test]
+    fn a_half_space_is_answered_as_parry_answers_it() {
+        let pose = Pose::from_parts(
+            Vec3::new(0.3, -1.2, 2.0),
+            Quat::from_rotation_x(0.4) * Quat::from_rotation_z(-0.7),
+        );
+        let plane = ColliderInstance::new(SharedShape::halfspace(Vec3::Y), pose, 0.5);
+        assert!(plane.plane.is_some());
+        let mut seed = 5u64;
+        let mut next = || {
+            seed = seed
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            ((seed >> 40) as f32) / ((1u64 << 24) as f32) * 8.0 - 4.0
+        };
+        let mut inside = 0;
+        for _ in 0..2000 {
+            let point = Vec3::new(next(), next(), next());
+            let projection = plane.shape.project_point(&plane.pose, point, false);
+            // The push out of the collider: parry's normal is its push divided by the depth,
+            // which rounding bends for shallow points; the push itself is what the contact uses.
+            let from_parry = projection.is_inside.then(|| projection.point - point);
+            match (plane.penetration(point), from_parry) {
+                (Some((depth, normal)), Some(push)) => {
+                    inside += 1;
+                    assert!(
+                        (normal * depth).distance(push) < 1e-5,
+                        "{point}: {} vs {push}",
+                        normal * depth
+                    );
+                }
+                (None, None) => {}
+                // A point within rounding of the plane may fall either way.
+                (ours, parry) => assert!(
+                    ours.map(|(depth, _)| depth)
+                        .or(parry.map(Vec3::length))
+                        .is_some_and(|depth| depth < 1e-5),
+                    "{point}: {ours:?} vs {parry:?}"
+                ),
+            }
+        }
+        assert!(inside > 500, "{inside} points inside");
+    }
+}
