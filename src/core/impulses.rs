@@ -1226,9 +1226,11 @@ impl PassView<'_> {
         let ebc = eb.cross(ec);
         let volume = ea.dot(ebc) * sixth;
         let c = volume - v0;
-        // Within tolerance (or exactly at rest): no impulse. A broken (NaN) volume is not
-        // within tolerance; its cubic has no root and it is counted.
-        let within = c.abs().cmp_le(f32x4::splat(tolerance) * v0);
+        // A correction within tolerance (or a tet exactly at rest): no impulse (see
+        // `ImpulseSettings::tolerance`). A broken (NaN) volume is not within tolerance; its
+        // cubic has no root and it is counted.
+        let correction = c.abs() * f32x4::splat(settings.gamma);
+        let within = correction.cmp_le(f32x4::splat(tolerance) * v0);
         let act = (!within).move_mask();
         if act == 0 {
             return outcomes;
@@ -1989,6 +1991,27 @@ mod tests {
         gentle.set_material(material).unwrap();
         gentle.one_ring_pass(H, &mut []);
         assert_ne!(gentle.velocities(), &before[..]);
+
+        // The per-tet pass skips a tet whose correction, gamma times its error, is within the
+        // tolerance: errors up to eight times the tolerance with the paper's gamma = 1/8.
+        let per_tet_only = |gamma: f32| {
+            VolumeMethod::Impulses(ImpulseSettings {
+                one_ring: false,
+                gamma,
+                ..ImpulseSettings::PAPER
+            })
+        };
+        for (gamma, corrected) in [(0.125, false), (1.0, true)] {
+            let mut body = shaken_body(0.01);
+            let error = largest_error(&body);
+            assert!(error > tolerance && error < 8.0 * tolerance, "{error}");
+            let mut material = *body.material();
+            material.method = per_tet_only(gamma);
+            body.set_material(material).unwrap();
+            let before = body.velocities().to_vec();
+            body.per_tet_pass(H, &mut []);
+            assert_eq!(body.velocities() != &before[..], corrected, "gamma {gamma}");
+        }
 
         // Errors above the tolerance are corrected with it.
         let mut shaken = shaken_body(0.05);
