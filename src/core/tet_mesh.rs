@@ -58,6 +58,11 @@ impl Csr {
     pub fn total(&self) -> usize {
         self.items.len()
     }
+
+    /// All items, row after row.
+    pub fn items(&self) -> &[u32] {
+        &self.items
+    }
 }
 
 /// What is wrong with a tet mesh given to [`TetMesh::new`].
@@ -170,11 +175,12 @@ pub struct Blocks {
     /// Tets of each task (the block of their lowest layers), in index order.
     pub tets: Csr,
     /// The same tets of each task in bundles of [`LANES`] that share no vertex, padded with
-    /// [`NO_TET`] (see [`bundle_tets`]): the per-tet pass computes a bundle's tets side by side
+    /// [`NO_TET`] (see [`bundle_disjoint`]): the per-tet pass computes a bundle's tets side by side
     /// in SIMD lanes, and since no impulse of a bundle moves a particle of another, that is
     /// exactly the four impulses one after another.
     pub tet_bundles: Csr,
-    /// Springs (indices into [`TetMesh::edges`]) of each task, like the tets.
+    /// Springs (indices into [`TetMesh::edges`]) of each task, in the order of their bundles
+    /// of [`LANES`] that share no vertex (see [`bundle_disjoint`]), without the padding.
     pub edges: Csr,
     /// For each task, the earlier tasks it must wait for: its neighbouring blocks of earlier
     /// colours.
@@ -189,16 +195,17 @@ pub struct Blocks {
 /// The padding of [`Blocks::tet_bundles`]: no tet.
 pub const NO_TET: u32 = u32::MAX;
 
-/// How far ahead in a task's tets [`bundle_tets`] looks for a bundle's other tets.
+/// How far ahead in a task's tets [`bundle_disjoint`] looks for a bundle's other tets.
 const BUNDLE_LOOK_AHEAD: usize = 128;
 
-/// `row`'s tets in bundles of [`LANES`] that share no vertex, padded with [`NO_TET`]. The row
-/// is cut into [`LANES`] parts, which are interleaved (the first tet of each part, then the
-/// second of each, ...), so that a bundle's tets come from parts of the block far apart; then
-/// each bundle starts with the first tet not yet bundled and takes the next ones that share no
-/// vertex with it, looking at most [`BUNDLE_LOOK_AHEAD`] tets ahead. Each lane walks its part
-/// in order (neighbouring tets share cache lines), and few lanes stay empty, even at the end.
-pub fn bundle_tets(tets: &[[u32; 4]], row: &[u32]) -> Vec<u32> {
+/// `row`'s tets (or springs: `tets` holds the vertices of each item) in bundles of [`LANES`]
+/// that share no vertex, padded with [`NO_TET`]. The row is cut into [`LANES`] parts, which
+/// are interleaved (the first tet of each part, then the second of each, ...), so that a
+/// bundle's tets come from parts of the block far apart; then each bundle starts with the
+/// first tet not yet bundled and takes the next ones that share no vertex with it, looking at
+/// most [`BUNDLE_LOOK_AHEAD`] tets ahead. Each lane walks its part in order (neighbouring tets
+/// share cache lines), and few lanes stay empty, even at the end.
+pub fn bundle_disjoint<const N: usize>(tets: &[[u32; N]], row: &[u32]) -> Vec<u32> {
     let part = row.len().div_ceil(LANES);
     let row: Vec<u32> = (0..part)
         .flat_map(|k| (0..LANES).filter_map(move |p| row.get(p * part + k).copied()))
@@ -368,6 +375,18 @@ impl Blocks {
             .enumerate()
             .map(|(e, edge)| (lowest(edge), e as u32))
             .collect();
+        // Each task's springs in the order of their bundles (see `bundle_disjoint`): consecutive
+        // springs of one vertex made the dampers a chain, each waiting for the velocity the
+        // last one stored; four that share no vertex run side by side.
+        let block_edges = Csr::from_pairs(count, &edge_pairs);
+        let edge_pairs: Vec<(u32, u32)> = (0..count)
+            .flat_map(|task| {
+                bundle_disjoint(edges, block_edges.row(task))
+                    .into_iter()
+                    .filter(|&e| e != NO_TET)
+                    .map(move |e| (task as u32, e))
+            })
+            .collect();
         let mut wait_pairs = Vec::new();
         for &(c, y, x) in &order {
             for ny in y.saturating_sub(1)..(y + 2).min(cb) {
@@ -381,7 +400,7 @@ impl Blocks {
         let block_tets = Csr::from_pairs(count, &tet_pairs);
         let bundle_pairs: Vec<(u32, u32)> = (0..count)
             .flat_map(|task| {
-                bundle_tets(tets, block_tets.row(task))
+                bundle_disjoint(tets, block_tets.row(task))
                     .into_iter()
                     .map(move |t| (task as u32, t))
             })
@@ -903,6 +922,9 @@ mod tests {
             assert_eq!(blocks.vertices.total(), mesh.vertex_count());
             assert_eq!(blocks.tets.total(), mesh.tet_count());
             assert_eq!(blocks.edges.total(), mesh.edges().len());
+            let mut springs = blocks.edges.items().to_vec();
+            springs.sort_unstable();
+            assert!(springs.iter().enumerate().all(|(k, &e)| k == e as usize));
         }
         // And the check finds what is wrong: tasks one layer wide, none waiting.
         let mesh = &meshes[0];

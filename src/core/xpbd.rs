@@ -22,6 +22,7 @@ use super::body::SoftBodyState;
 use super::contacts::{ColliderInstance, RigidSphereState};
 use super::geometry::{signed_volume, volume_gradients};
 use super::material::VolumeMethod;
+use super::tet_mesh::NO_TET;
 
 impl SoftBodyState {
     /// Stage 3 for [`VolumeMethod::Xpbd`]: the whole step in substeps, contacts included. It
@@ -101,10 +102,16 @@ impl SoftBodyState {
     }
 
     /// One Gauss-Seidel pass over the edge constraints, compliance `alpha` already divided by
-    /// the squared substep.
+    /// the squared substep, in the blocks' order of the springs (see
+    /// [`Blocks::edges`](super::tet_mesh::Blocks::edges)): the same order the other methods'
+    /// dampers take, where consecutive constraints share no particle and do not wait for each
+    /// other's results.
     fn project_edges(&mut self, alpha: f32) {
         let x = &mut self.positions;
-        for (e, &[i, j]) in self.mesh.edges().iter().enumerate() {
+        let edges = self.mesh.edges();
+        for &e in self.mesh.blocks().edges.items() {
+            let e = e as usize;
+            let [i, j] = edges[e];
             let (i, j) = (i as usize, j as usize);
             let (wi, wj) = (self.inv_masses[i], self.inv_masses[j]);
             if wi + wj == 0.0 {
@@ -125,10 +132,17 @@ impl SoftBodyState {
         }
     }
 
-    /// One Gauss-Seidel pass over the tets' volume constraints (zero compliance).
+    /// One Gauss-Seidel pass over the tets' volume constraints (zero compliance), in the order
+    /// of the per-tet pass's bundles (see
+    /// [`Blocks::tet_bundles`](super::tet_mesh::Blocks::tet_bundles)), for the same reason.
     fn project_volumes(&mut self) {
         let x = &mut self.positions;
-        for (tet, &v0) in self.mesh.tets().iter().zip(self.mesh.rest_volumes()) {
+        let (tets, rest_volumes) = (self.mesh.tets(), self.mesh.rest_volumes());
+        for &t in self.mesh.blocks().tet_bundles.items() {
+            if t == NO_TET {
+                continue;
+            }
+            let (tet, v0) = (&tets[t as usize], rest_volumes[t as usize]);
             let p = tet.map(|i| x[i as usize]);
             let c = (signed_volume(&p) - v0) / v0;
             if c == 0.0 {
