@@ -22,7 +22,6 @@ use super::body::SoftBodyState;
 use super::contacts::{ColliderInstance, RigidSphereState};
 use super::geometry::{signed_volume, volume_gradients};
 use super::material::VolumeMethod;
-use super::tet_mesh::NO_TET;
 
 impl SoftBodyState {
     /// Stage 3 for [`VolumeMethod::Xpbd`]: the whole step in substeps, contacts included. It
@@ -132,17 +131,15 @@ impl SoftBodyState {
         }
     }
 
-    /// One Gauss-Seidel pass over the tets' volume constraints (zero compliance), in the order
-    /// of the per-tet pass's bundles (see
-    /// [`Blocks::tet_bundles`](super::tet_mesh::Blocks::tet_bundles)), for the same reason.
+    /// One Gauss-Seidel pass over the tets' volume constraints (zero compliance), in index
+    /// order. The per-tet pass's bundle order (see
+    /// [`Blocks::tet_bundles`](super::tet_mesh::Blocks::tet_bundles)) made this pass twice as
+    /// fast, but a sweep in index order carries a correction across the mesh in one pass, and
+    /// without it the soft cube peaked at 0.9 to 1.4 % with 7 to 11 inverted tets at 2 to 6
+    /// substeps (0.23 % and none at 2 substeps in index order): the peer keeps its accuracy.
     fn project_volumes(&mut self) {
         let x = &mut self.positions;
-        let (tets, rest_volumes) = (self.mesh.tets(), self.mesh.rest_volumes());
-        for &t in self.mesh.blocks().tet_bundles.items() {
-            if t == NO_TET {
-                continue;
-            }
-            let (tet, v0) = (&tets[t as usize], rest_volumes[t as usize]);
+        for (tet, &v0) in self.mesh.tets().iter().zip(self.mesh.rest_volumes()) {
             let p = tet.map(|i| x[i as usize]);
             let c = (signed_volume(&p) - v0) / v0;
             if c == 0.0 {
