@@ -1571,6 +1571,13 @@ mod tests {
         body
     }
 
+    /// Switches `body` to the paper's method with `settings`.
+    fn use_impulses(body: &mut SoftBodyState, settings: ImpulseSettings) {
+        let mut material = *body.material();
+        material.method = VolumeMethod::Impulses(settings);
+        body.set_material(material).unwrap();
+    }
+
     fn previewed_volume(body: &SoftBodyState, t: usize) -> f32 {
         signed_volume(&body.mesh.tets()[t].map(|i| body.preview(i)))
     }
@@ -1883,12 +1890,13 @@ mod tests {
         let mut clamped = 0;
         for strength in [0.3, 3.0, 4.0, 6.0] {
             let mut fast = shaken_body(strength);
-            let mut material = *fast.material();
-            material.method = VolumeMethod::Impulses(ImpulseSettings {
-                gamma: 1.0,
-                ..ImpulseSettings::PAPER
-            });
-            fast.set_material(material).unwrap();
+            use_impulses(
+                &mut fast,
+                ImpulseSettings {
+                    gamma: 1.0,
+                    ..ImpulseSettings::PAPER
+                },
+            );
             let mut exact = fast.clone();
             exact.clamp_bounds.disabled = true;
             for body in [&mut fast, &mut exact] {
@@ -1917,12 +1925,13 @@ mod tests {
         let (mut skipped, mut clamped) = (0, 0);
         for (throw, between_passes) in [(Vec3::X * 6.0, true), (Vec3::Y * 48.0, false)] {
             let mut fast = shaken_body(0.0);
-            let mut material = *fast.material();
-            material.method = VolumeMethod::Impulses(ImpulseSettings {
-                gamma: 1.0,
-                ..ImpulseSettings::PAPER
-            });
-            fast.set_material(material).unwrap();
+            use_impulses(
+                &mut fast,
+                ImpulseSettings {
+                    gamma: 1.0,
+                    ..ImpulseSettings::PAPER
+                },
+            );
             // The middle particle of the 5 x 5 x 5 grid.
             let thrown = 2 + 5 * (2 + 5 * 2);
             if !between_passes {
@@ -1986,28 +1995,22 @@ mod tests {
         );
 
         // The same body with no tolerance is corrected.
-        let mut material = *gentle.material();
-        material.method = VolumeMethod::Impulses(exact(0.125, true));
-        gentle.set_material(material).unwrap();
+        use_impulses(&mut gentle, exact(0.125, true));
         gentle.one_ring_pass(H, &mut []);
         assert_ne!(gentle.velocities(), &before[..]);
 
         // The per-tet pass skips a tet whose correction, gamma times its error, is within the
         // tolerance: errors up to eight times the tolerance with the paper's gamma = 1/8.
-        let per_tet_only = |gamma: f32| {
-            VolumeMethod::Impulses(ImpulseSettings {
-                one_ring: false,
-                gamma,
-                ..ImpulseSettings::PAPER
-            })
-        };
         for (gamma, corrected) in [(0.125, false), (1.0, true)] {
             let mut body = shaken_body(0.01);
             let error = largest_error(&body);
             assert!(error > tolerance && error < 8.0 * tolerance, "{error}");
-            let mut material = *body.material();
-            material.method = per_tet_only(gamma);
-            body.set_material(material).unwrap();
+            let per_tet_only = ImpulseSettings {
+                one_ring: false,
+                gamma,
+                ..ImpulseSettings::PAPER
+            };
+            use_impulses(&mut body, per_tet_only);
             let before = body.velocities().to_vec();
             body.per_tet_pass(H, &mut []);
             assert_eq!(body.velocities() != &before[..], corrected, "gamma {gamma}");
