@@ -40,7 +40,7 @@ use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial
 use super::lanes::{LANES, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
-use super::roots::{Cubic, first_crossing, monotone_root};
+use super::roots::{Cubic, clear_of_zero, first_crossing, monotone_root};
 use super::tet_mesh::{Csr, NO_TET, TetMesh};
 
 /// What one impulse did.
@@ -142,7 +142,7 @@ impl ClampBounds {
         ] {
             array.resize(len, 0.0);
         }
-        motion.unclear_rank.resize(n, 0);
+        motion.walked.0.resize_with(tets, || AtomicU32::new(0));
         motion.far_nearby.0.resize_with(n, || AtomicU32::new(0));
         self.start.resize(n, Vec3::ZERO);
     }
@@ -309,10 +309,12 @@ pub(crate) struct ClampMotion {
     /// During a clamp walk, the length of each particle's direction (zero for particles the
     /// impulse does not move), so the walk reads one number per vertex.
     move_len: Vec<f32>,
-    /// During a clamp walk over the one-rings of unclear vertices (see
-    /// [`PassView::clamp_unclear`]), each such vertex's place in that list, from 1 (zero for
-    /// every other particle): a tet holding a vertex listed earlier was already looked at.
-    unclear_rank: Vec<u32>,
+    /// For each tet, the number of the last clamp walk that looked at it (see
+    /// [`PassView::clamp_unclear`]): one-rings of the walked vertices overlap, and a tet is
+    /// looked at once per walk.
+    walked: PassMarks,
+    /// The number of the last clamp walk (from 1), shared by the tasks of a pass.
+    walks: WalkCount,
     /// For a pass that goes on from bounds taken earlier, the largest drift among each block's
     /// vertices at its start.
     block_drift: Vec<f32>,
@@ -349,6 +351,17 @@ impl Clone for PassMarks {
     }
 }
 
+/// The number of the last clamp walk ([`ClampMotion::walks`]); a clone starts at zero, as its
+/// marks do.
+#[derive(Debug, Default)]
+pub(crate) struct WalkCount(AtomicU32);
+
+impl Clone for WalkCount {
+    fn clone(&self) -> WalkCount {
+        WalkCount::default()
+    }
+}
+
 impl ClampMotion {
     /// Starts the marks of a new pass with clamp bounds.
     fn next_pass(&mut self) {
@@ -359,6 +372,41 @@ impl ClampMotion {
             self.pass_number = 0;
         }
         self.pass_number += 1;
+        // A pass has fewer walks than impulses, far fewer than half the numbers: starting
+        // again from zero between passes, no walk can find a mark a later walk left.
+        if *self.walks.0.get_mut() > u32::MAX / 2 {
+            for mark in &self.walked.0 {
+                mark.store(0, Ordering::Relaxed);
+            }
+            *self.walks.0.get_mut() = 0;
+        }
+    }
+}
+
+/// Which tets the running clamp walk has looked at ([`ClampMotion::walked`]). Tasks that run
+/// at the same time can walk the same tet (their clamp regions can touch), so the marks are
+/// atomic; each walk has its own number, so a walk only skips a tet it marked itself.
+#[derive(Clone, Copy)]
+struct WalkMarks<'a> {
+    walked: &'a [AtomicU32],
+    walks: &'a AtomicU32,
+}
+
+impl WalkMarks<'_> {
+    /// A number for a new walk, never used before in this pass or since the marks were clear.
+    fn start(&self) -> u32 {
+        self.walks.fetch_add(1, Ordering::Relaxed) + 1
+    }
+
+    /// Marks tet `t` for `walk`; whether it was unmarked.
+    #[inline(always)]
+    fn first_visit(&self, walk: u32, t: u32) -> bool {
+        let mark = &self.walked[t as usize];
+        if mark.load(Ordering::Relaxed) == walk {
+            return false;
+        }
+        mark.store(walk, Ordering::Relaxed);
+        true
     }
 }
 
@@ -394,7 +442,13 @@ impl FarDrift<'_> {
 /// What one block's task owns during a pass (see [`super::parallel`]): its working arrays, its
 /// counters, and the velocity changes it gives the spheres, added to them after the pass in
 /// block order so that the sum does not depend on which task finished first.
+///
+/// Aligned to two cache lines (the prefetcher pulls lines in pairs): the workers of tasks that
+/// run at the same time are neighbours in one array, and each writes its counters and largest
+/// drift with every impulse; sharing a line, two threads would take it from each other each
+/// time (about 2 % of the two-thread step in the soft cube, within the noise of one run).
 #[derive(Clone, Debug, Default)]
+#[repr(align(128))]
 pub(crate) struct PassWorker {
     ring_work: RingWork,
     counters: StepCounters,
@@ -718,7 +772,10 @@ impl SoftBodyState {
             let scratch = SharedSlice::new(&mut self.scratch);
             let drift = SharedSlice::new(&mut self.clamp_motion.drift);
             let move_len = SharedSlice::new(&mut self.clamp_motion.move_len);
-            let unclear_rank = SharedSlice::new(&mut self.clamp_motion.unclear_rank);
+            let walks = WalkMarks {
+                walked: &self.clamp_motion.walked.0,
+                walks: &self.clamp_motion.walks.0,
+            };
             let block_drift = SharedSlice::new(&mut self.clamp_motion.block_drift);
             let far = FarDrift {
                 marks: &self.clamp_motion.far_nearby.0,
@@ -800,7 +857,7 @@ impl SoftBodyState {
                             scratch,
                             drift,
                             move_len,
-                            unclear_rank,
+                            walks,
                             far,
                         };
                         // The particles this task reads were last moved by the tasks it
@@ -900,9 +957,11 @@ impl SoftBodyState {
     fn single_view(&mut self, h: f32) -> PassView<'_> {
         self.clamp_motion.drift.resize(self.previews.len(), 0.0);
         self.clamp_motion.move_len.resize(self.previews.len(), 0.0);
+        let tets = self.mesh.tet_count();
         self.clamp_motion
-            .unclear_rank
-            .resize(self.previews.len(), 0);
+            .walked
+            .0
+            .resize_with(tets, || AtomicU32::new(0));
         PassView {
             mesh: &self.mesh,
             h,
@@ -917,7 +976,10 @@ impl SoftBodyState {
             scratch: SharedSlice::new(&mut self.scratch),
             drift: SharedSlice::new(&mut self.clamp_motion.drift),
             move_len: SharedSlice::new(&mut self.clamp_motion.move_len),
-            unclear_rank: SharedSlice::new(&mut self.clamp_motion.unclear_rank),
+            walks: WalkMarks {
+                walked: &self.clamp_motion.walked.0,
+                walks: &self.clamp_motion.walks.0,
+            },
             far: FarDrift {
                 marks: &self.clamp_motion.far_nearby.0,
                 pass: self.clamp_motion.pass_number,
@@ -944,7 +1006,7 @@ pub(crate) struct PassView<'a> {
     scratch: SharedSlice<'a, Vec3>,
     drift: SharedSlice<'a, f32>,
     move_len: SharedSlice<'a, f32>,
-    unclear_rank: SharedSlice<'a, u32>,
+    walks: WalkMarks<'a>,
     far: FarDrift<'a>,
 }
 
@@ -1401,29 +1463,15 @@ impl PassView<'_> {
     }
 
     /// The neighbour clamp over the one-rings of the `unclear` vertices of
-    /// [`PassView::find_unclear`], each tet once: a tet of a later vertex's one-ring that holds
-    /// an earlier listed vertex was looked at with that one. The `unclear` vertices are the
-    /// impulse's own particles, which only this task writes, so their ranks are its to set.
+    /// [`PassView::find_unclear`], each tet once (the one-rings overlap; see [`WalkMarks`]).
     fn clamp_unclear(&self, unclear: &[u32], mut step: f64) -> f64 {
-        let tets = self.mesh.tets();
-        for (k, &v) in unclear.iter().enumerate() {
-            self.unclear_rank.set(v as usize, k as u32 + 1);
-        }
-        for (k, &v) in unclear.iter().enumerate() {
-            let seen = |t: &&u32| {
-                tets[**t as usize].iter().any(|&u| {
-                    let rank = self.unclear_rank.get(u as usize);
-                    rank != 0 && rank <= k as u32
-                })
-            };
+        let walk = self.walks.start();
+        for &v in unclear {
             let ring = self.mesh.one_ring(v as usize).iter();
-            step = self.neighbour_clamp(ring.filter(|t| !seen(t)), step);
+            step = self.neighbour_clamp(ring.filter(|&&t| self.walks.first_visit(walk, t)), step);
             if step == 0.0 {
                 break;
             }
-        }
-        for &v in unclear {
-            self.unclear_rank.set(v as usize, 0);
         }
         step
     }
@@ -1492,6 +1540,13 @@ impl PassView<'_> {
             }
             // A tet at its floor may sit a rounding error below it: start it exactly there.
             c[0] = (c[0] - floor as f64).max(0.0);
+            // The cubic's own bound over `[0, step]`: most tets the cheaper bounds above could
+            // not clear are still far from their floor along this impulse (in the soft cube,
+            // one in a hundred and fifty of the cubics solved here shortened the step), and the
+            // root search costs many times this.
+            if clear_of_zero(&c, step) {
+                continue;
+            }
             if let Some(s) = first_crossing(&c, step) {
                 step = s;
                 if step == 0.0 {

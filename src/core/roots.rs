@@ -56,6 +56,16 @@ pub fn first_crossing(c: &Cubic, hi: f64) -> Option<f64> {
     first_root(c, hi, Touching::Ignore)
 }
 
+/// Whether `c`, positive at zero, stays positive on `[0, hi]` by its coefficients alone: its
+/// value there differs from `c[0]` by at most `|c1| hi + |c2| hi^2 + |c3| hi^3`. A few
+/// operations against [`first_crossing`]'s search; `false` says nothing.
+#[inline]
+pub fn clear_of_zero(c: &Cubic, hi: f64) -> bool {
+    let reach = hi * (c[1].abs() + hi * (c[2].abs() + hi * c[3].abs()));
+    // The margin covers the rounding of the bound itself.
+    c[0] > reach * (1.0 + 1e-9)
+}
+
 /// The root of `c` reached from `s = 0` while `c` moves monotonically towards zero: `c(0)` and
 /// `c'(0)` have opposite signs and no critical point comes before the root. This is the root an
 /// impulse may use. A polynomial that first moves away from zero, or turns before reaching it,
@@ -370,6 +380,27 @@ mod tests {
             checked > 1000,
             "too few random cubics had a root: {checked}"
         );
+    }
+
+    #[test]
+    fn cubics_clear_of_zero_do_not_cross_it() {
+        let mut rng = Lcg(13);
+        let (mut cleared, mut crossing) = (0, 0);
+        for _ in 0..20_000 {
+            let mut c = rng.cubic();
+            c[0] = c[0].abs();
+            let hi = rng.range(0.01, 2.0);
+            let crosses =
+                first_crossing(&c, hi).is_some() || sampled_first_crossing(&c, hi, 2_000).is_some();
+            crossing += crosses as u32;
+            if clear_of_zero(&c, hi) {
+                cleared += 1;
+                assert!(!crosses, "{c:?} on [0, {hi}] was cleared but crosses zero");
+            }
+        }
+        // Both kinds were seen, and the test clears a good share of the rest.
+        assert!(crossing > 1000, "{crossing} crossings");
+        assert!(cleared > 4000, "{cleared} cleared");
     }
 
     #[test]
