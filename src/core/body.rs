@@ -150,7 +150,8 @@ impl SoftBodyState {
             material,
             scratch: vec![Vec3::ZERO; n],
             contact_normals: vec![Vec3::ZERO; n],
-            previews: vec![Vec3::ZERO; n],
+            // One more than the particles, for four-number loads (`Vec3x4::gather_padded`).
+            previews: vec![Vec3::ZERO; n + 1],
             clamp_bounds: Default::default(),
             contact_kept: vec![0.0; n],
             contact_sphere: vec![u32::MAX; n],

@@ -167,19 +167,17 @@ const BOUNDS_CHUNK: usize = 512;
 
 impl BoundsView<'_> {
     /// The radius of `tets` at `previews` from their slack, gradient sum and reach, four tets
-    /// at a time (see `lanes`), the tail padded with collapsed tets.
+    /// at a time (see `lanes`). Needs `previews` padded (see [`Vec3x4::gather_padded`]) and
+    /// unchanging while it runs.
     fn compute_tets(&self, mesh: &TetMesh, previews: SharedSlice<Vec3>, tets: Range<usize>) {
         let (all, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
         for start in tets.clone().step_by(LANES) {
             let n = LANES.min(tets.end - start);
+            // Lanes past the tail repeat the last tet (computed, not stored).
             let corner = |k: usize| {
-                Vec3x4::from_vecs(std::array::from_fn(|l| {
-                    if l < n {
-                        previews.get(all[start + l][k] as usize)
-                    } else {
-                        Vec3::ZERO
-                    }
-                }))
+                let at = std::array::from_fn(|l| all[start + l.min(n - 1)][k] as usize);
+                // Safety: the bounds are computed before any job of the pass moves a particle.
+                unsafe { previews.gather_padded(at) }
             };
             let xd = corner(3);
             let e = [corner(0) - xd, corner(1) - xd, corner(2) - xd];
@@ -198,9 +196,7 @@ impl BoundsView<'_> {
                 .max(e[1].length_squared())
                 .max(e[2].length_squared())
                 .sqrt();
-            let v0 = f32x4::new(std::array::from_fn(|l| {
-                rest_volumes.get(start + l).copied().unwrap_or(0.0)
-            }));
+            let v0 = f32x4::new(std::array::from_fn(|l| rest_volumes[start + l.min(n - 1)]));
             let eps = f32x4::splat(CLAMP_FRACTION) * v0;
             // A tet below eps may lose half the slack over the pass, and must not get back
             // above eps within the bound either: above eps, the exact rule would hold it there.
@@ -564,23 +560,20 @@ impl RingWork {
     pub(crate) fn for_mesh(mesh: &TetMesh) -> RingWork {
         let n = mesh.max_ring_vertices();
         RingWork {
-            previews: vec![Vec3::ZERO; n],
+            // One more than a ring can fill, for `Vec3x4::gather_padded`.
+            previews: vec![Vec3::ZERO; n + 1],
             inv_masses: vec![0.0; n],
-            directions: vec![Vec3::ZERO; n],
+            directions: vec![Vec3::ZERO; n + 1],
             tets: vec![RingLanes::default(); mesh.max_one_ring().div_ceil(LANES)],
         }
     }
 }
 
-/// Corner `k` of four ring tets, from the ring's gathered `values`.
+/// Corner `k` of four ring tets, from the ring's gathered `values` (padded, see
+/// [`Vec3x4::gather_padded`]).
 #[inline(always)]
 fn gather(values: &[Vec3], corners: &[[u16; 4]; LANES], k: usize) -> Vec3x4 {
-    Vec3x4::from_vecs([
-        values[corners[0][k] as usize],
-        values[corners[1][k] as usize],
-        values[corners[2][k] as usize],
-        values[corners[3][k] as usize],
-    ])
+    Vec3x4::gather_padded(values, corners.map(|c| c[k] as usize))
 }
 
 /// [`gather`] for numbers.

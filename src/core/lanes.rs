@@ -57,6 +57,25 @@ impl Vec3x4 {
         std::array::from_fn(|l| Vec3::new(x[l], y[l], z[l]))
     }
 
+    /// `values[at[l]]` in lane `l`, each read as four numbers (the vector and the next one's
+    /// `x`, dropped) and the four transposed: four loads and a few shuffles, where gathering
+    /// component by component takes twelve loads and as many shuffles. `values` needs one
+    /// vector more than the indices reach (the last index read is `values.len() - 2`).
+    #[inline(always)]
+    pub fn gather_padded(values: &[Vec3], at: [usize; LANES]) -> Vec3x4 {
+        // Safety: `Vec3` is `repr(C)`, three `f32` and no padding (size 12, align 4), so the
+        // vectors are `3 * len` numbers one after another.
+        let flat: &[f32] =
+            unsafe { std::slice::from_raw_parts(values.as_ptr().cast::<f32>(), 3 * values.len()) };
+        let row = |l: usize| {
+            let start = 3 * at[l];
+            let four: [f32; 4] = flat[start..start + 4].try_into().expect("four numbers");
+            f32x4::new(four)
+        };
+        let [x, y, z, _] = f32x4::transpose([row(0), row(1), row(2), row(3)]);
+        Vec3x4 { x, y, z }
+    }
+
     /// Cross product per lane, as [`Vec3::cross`].
     #[inline(always)]
     pub fn cross(self, rhs: Vec3x4) -> Vec3x4 {
@@ -158,6 +177,17 @@ mod tests {
             assert_eq!(diff[l], a[l] - b[l]);
             assert_eq!(neg[l], -a[l]);
             assert_eq!(scaled[l], a[l] * b[l].y);
+        }
+    }
+
+    #[test]
+    fn padded_gather_reads_the_vectors_asked_for() {
+        let mut values: Vec<Vec3> = (0..9).map(|k| vecs(k as f32)[k % LANES]).collect();
+        values.push(Vec3::NAN);
+        let at = [7, 0, 3, 8];
+        let lanes = Vec3x4::gather_padded(&values, at).to_vecs();
+        for l in 0..LANES {
+            assert_eq!(lanes[l], values[at[l]]);
         }
     }
 }

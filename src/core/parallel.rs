@@ -8,6 +8,8 @@
 //! [`Parallel`] (the plugin's runs jobs on Bevy's compute task pool).
 
 use std::marker::PhantomData;
+
+use super::lanes::{LANES, Vec3x4};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Something that runs independent jobs, possibly on several threads.
@@ -95,6 +97,23 @@ impl<T: Copy> SharedSlice<'_, T> {
         assert!(i < self.len);
         // Safety: in bounds; no other job reads or writes element `i` now (the blocks' promise).
         unsafe { *self.ptr.add(i) = value }
+    }
+}
+
+impl SharedSlice<'_, glam::Vec3> {
+    /// The vectors at `at` in lanes, read as [`Vec3x4::gather_padded`] does (the slice needs
+    /// one vector more than the indices reach).
+    ///
+    /// # Safety
+    /// No job may write the slice while this reads it: it reads the whole slice, not only the
+    /// elements at `at` (the stage computing the clamp bounds, say, which only reads).
+    ///
+    /// [`Vec3x4::gather_padded`]: super::lanes::Vec3x4::gather_padded
+    #[inline(always)]
+    pub(crate) unsafe fn gather_padded(&self, at: [usize; LANES]) -> Vec3x4 {
+        // Safety: the caller's promise; `ptr` and `len` are those of the borrowed slice.
+        let values = unsafe { std::slice::from_raw_parts(self.ptr, self.len) };
+        Vec3x4::gather_padded(values, at)
     }
 }
 
