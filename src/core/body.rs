@@ -21,6 +21,7 @@ use glam::Vec3;
 use super::contacts::RigidSphereState;
 use super::geometry::{signed_volume, volume_gradients};
 use super::impulses::{ClampMotion, PassWorker};
+use super::lanes::Point4;
 use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
 use super::parallel::{BlockFlags, Parallel, Phase, Serial, SharedSlice, run_phases};
 use super::tet_mesh::TetMesh;
@@ -101,7 +102,8 @@ pub struct SoftBodyState {
     pub(crate) contact_normals: Vec<Vec3>,
     /// Previewed positions `x + h v` during the volume passes, kept in step with every velocity
     /// change there (`apply_velocity_change`), so the passes read one array, not two.
-    pub(crate) previews: Vec<Vec3>,
+    /// Four numbers each, so that four are gathered into SIMD lanes with a load each.
+    pub(crate) previews: Vec<Point4>,
     /// Bounds that let most impulses skip the neighbour clamp (see `impulses.rs`).
     pub(crate) clamp_bounds: super::impulses::ClampBounds,
     /// Per particle in contact, the share `f` of a push into the contact that the particle keeps:
@@ -150,8 +152,7 @@ impl SoftBodyState {
             material,
             scratch: vec![Vec3::ZERO; n],
             contact_normals: vec![Vec3::ZERO; n],
-            // One more than the particles, for four-number loads (`Vec3x4::gather_padded`).
-            previews: vec![Vec3::ZERO; n + 1],
+            previews: vec![Point4::default(); n],
             clamp_bounds: Default::default(),
             contact_kept: vec![0.0; n],
             contact_sphere: vec![u32::MAX; n],
@@ -492,7 +493,7 @@ impl SoftBodyState {
     #[cfg(test)]
     #[inline]
     pub(crate) fn preview(&self, i: u32) -> Vec3 {
-        self.previews[i as usize]
+        self.previews[i as usize].vec3()
     }
 
     /// Sets every previewed position to `x + h v`.
@@ -503,7 +504,7 @@ impl SoftBodyState {
             .zip(&self.positions)
             .zip(&self.velocities)
         {
-            *xp = *x + h * *v;
+            *xp = Point4::new(*x + h * *v);
         }
     }
 

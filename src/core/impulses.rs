@@ -37,7 +37,7 @@ use wide::{CmpGe, CmpGt, CmpLe, CmpNe, f32x4};
 use super::body::{SoftBodyState, StepCounters};
 use super::contacts::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_lanes};
-use super::lanes::{LANES, Vec3x4};
+use super::lanes::{LANES, Point4, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
 use super::roots::{Cubic, clear_of_zero, first_crossing, monotone_root};
@@ -167,17 +167,16 @@ const BOUNDS_CHUNK: usize = 512;
 
 impl BoundsView<'_> {
     /// The radius of `tets` at `previews` from their slack, gradient sum and reach, four tets
-    /// at a time (see `lanes`). Needs `previews` padded (see [`Vec3x4::gather_padded`]) and
-    /// unchanging while it runs.
-    fn compute_tets(&self, mesh: &TetMesh, previews: SharedSlice<Vec3>, tets: Range<usize>) {
+    /// at a time (see `lanes`).
+    fn compute_tets(&self, mesh: &TetMesh, previews: SharedSlice<Point4>, tets: Range<usize>) {
         let (all, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
         for start in tets.clone().step_by(LANES) {
             let n = LANES.min(tets.end - start);
             // Lanes past the tail repeat the last tet (computed, not stored).
             let corner = |k: usize| {
-                let at = std::array::from_fn(|l| all[start + l.min(n - 1)][k] as usize);
-                // Safety: the bounds are computed before any job of the pass moves a particle.
-                unsafe { previews.gather_padded(at) }
+                previews.gather(std::array::from_fn(|l| {
+                    all[start + l.min(n - 1)][k] as usize
+                }))
             };
             let xd = corner(3);
             let e = [corner(0) - xd, corner(1) - xd, corner(2) - xd];
@@ -219,14 +218,14 @@ impl BoundsView<'_> {
     fn compute_vertices(
         &self,
         mesh: &TetMesh,
-        previews: SharedSlice<Vec3>,
+        previews: SharedSlice<Point4>,
         drift: SharedSlice<f32>,
         vertices: Range<usize>,
     ) {
         for v in vertices {
             self.vertex_radius
                 .set(v, smallest(mesh.one_ring(v), self.tet_radius));
-            self.start.set(v, previews.get(v));
+            self.start.set(v, previews.get(v).vec3());
             drift.set(v, 0.0);
         }
     }
@@ -260,7 +259,7 @@ impl BoundsView<'_> {
     fn carry_drift(
         &self,
         mesh: &TetMesh,
-        previews: SharedSlice<Vec3>,
+        previews: SharedSlice<Point4>,
         drift: SharedSlice<f32>,
         far: FarDrift,
         vertices: &[u32],
@@ -268,7 +267,7 @@ impl BoundsView<'_> {
         let mut largest = 0.0f32;
         for &v in vertices {
             let v = v as usize;
-            let d = (previews.get(v) - self.start.get(v)).length();
+            let d = (previews.get(v).vec3() - self.start.get(v)).length();
             drift.set(v, d);
             if self.is_far(v, d) {
                 far.mark(mesh, v);
@@ -548,7 +547,7 @@ fn safe_radius(slack: f32x4, grad: f32x4, l: f32x4) -> f32x4 {
 /// four to an entry.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct RingWork {
-    previews: Vec<Vec3>,
+    previews: Vec<Point4>,
     inv_masses: Vec<f32>,
     /// The summed directions `D_i`.
     directions: Vec<Vec3>,
@@ -560,8 +559,7 @@ impl RingWork {
     pub(crate) fn for_mesh(mesh: &TetMesh) -> RingWork {
         let n = mesh.max_ring_vertices();
         RingWork {
-            // One more than a ring can fill, for `Vec3x4::gather_padded`.
-            previews: vec![Vec3::ZERO; n + 1],
+            previews: vec![Point4::default(); n],
             inv_masses: vec![0.0; n],
             directions: vec![Vec3::ZERO; n + 1],
             tets: vec![RingLanes::default(); mesh.max_one_ring().div_ceil(LANES)],
@@ -994,7 +992,7 @@ pub(crate) struct PassView<'a> {
     bounds: BoundsView<'a>,
     velocities: SharedSlice<'a, Vec3>,
     /// Previewed positions `x + h v`, kept up to date with every velocity change.
-    previews: SharedSlice<'a, Vec3>,
+    previews: SharedSlice<'a, Point4>,
     /// Impulse directions by particle, for the clamp walk (zero outside a walk).
     scratch: SharedSlice<'a, Vec3>,
     drift: SharedSlice<'a, f32>,
@@ -1006,7 +1004,7 @@ pub(crate) struct PassView<'a> {
 impl PassView<'_> {
     #[inline(always)]
     fn preview(&self, i: u32) -> Vec3 {
-        self.previews.get(i as usize)
+        self.previews.get(i as usize).vec3()
     }
 
     /// `d` with its push into what particle `i` touches reduced to the part the particle keeps:
@@ -1030,8 +1028,8 @@ impl PassView<'_> {
     #[inline(always)]
     fn apply_velocity_change(&self, worker: &mut PassWorker, i: usize, dv: Vec3) {
         self.velocities.set(i, self.velocities.get(i) + dv);
-        let preview = self.previews.get(i) + self.h * dv;
-        self.previews.set(i, preview);
+        let preview = self.previews.get(i).vec3() + self.h * dv;
+        self.previews.set(i, Point4::new(preview));
         if self.bounds.active {
             let drift = (preview - self.bounds.start.get(i)).length();
             if !self.bounds.is_far(i, drift) {
@@ -1093,8 +1091,10 @@ impl PassView<'_> {
             }
             // Unused lanes hold a tet collapsed onto the centre: zero edges, volume and error.
             // Every tet's last corner is the centre (see `TetMesh::ring_corners`).
-            let x = |k: usize| gather(&work.previews, &tet_corners, k);
-            let xd = Vec3x4::splat(work.previews[0]);
+            let x = |k: usize| {
+                Vec3x4::gather_points(&work.previews, tet_corners.map(|c| c[k] as usize))
+            };
+            let xd = Vec3x4::splat(work.previews[0].vec3());
             let edges = [x(0) - xd, x(1) - xd, x(2) - xd];
             let sixth = f32x4::splat(SIXTH);
             let gradients = [
@@ -1272,8 +1272,7 @@ impl PassView<'_> {
             Some(&t) if t != NO_TET => mesh.rest_volumes()[t as usize],
             _ => 0.0,
         }));
-        let corner =
-            |k: usize| Vec3x4::from_vecs(std::array::from_fn(|l| self.preview(tets[l][k])));
+        let corner = |k: usize| self.previews.gather(tets.map(|t| t[k] as usize));
         let xd = corner(3);
         let (ea, eb, ec) = (corner(0) - xd, corner(1) - xd, corner(2) - xd);
         let sixth = f32x4::splat(SIXTH);

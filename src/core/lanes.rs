@@ -8,6 +8,33 @@
 use glam::Vec3;
 use wide::f32x4;
 
+/// A position kept as four numbers (the fourth unused), sixteen bytes aligned: four of them
+/// go into lanes with one load each and a transpose ([`Vec3x4::gather_points`]), and a load
+/// never reaches into the next particle.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[repr(C, align(16))]
+pub struct Point4([f32; 4]);
+
+impl Point4 {
+    /// The position `v`.
+    #[inline(always)]
+    pub fn new(v: Vec3) -> Point4 {
+        Point4([v.x, v.y, v.z, 0.0])
+    }
+
+    /// The position as a `Vec3`.
+    #[inline(always)]
+    pub fn vec3(self) -> Vec3 {
+        Vec3::new(self.0[0], self.0[1], self.0[2])
+    }
+
+    /// The four numbers in lanes.
+    #[inline(always)]
+    pub fn row(self) -> f32x4 {
+        f32x4::new(self.0)
+    }
+}
+
 /// Number of tets handled together.
 pub const LANES: usize = 4;
 
@@ -73,6 +100,19 @@ impl Vec3x4 {
             f32x4::new(four)
         };
         let [x, y, z, _] = f32x4::transpose([row(0), row(1), row(2), row(3)]);
+        Vec3x4 { x, y, z }
+    }
+
+    /// The positions `points[at[l]]` in lane `l`: four loads and a transpose.
+    #[inline(always)]
+    pub fn gather_points(points: &[Point4], at: [usize; LANES]) -> Vec3x4 {
+        Vec3x4::from_rows(at.map(|i| points[i].row()))
+    }
+
+    /// Lane `l` from the first three numbers of `rows[l]` ([`Point4::row`]).
+    #[inline(always)]
+    pub fn from_rows(rows: [f32x4; LANES]) -> Vec3x4 {
+        let [x, y, z, _] = f32x4::transpose(rows);
         Vec3x4 { x, y, z }
     }
 
@@ -177,6 +217,18 @@ mod tests {
             assert_eq!(diff[l], a[l] - b[l]);
             assert_eq!(neg[l], -a[l]);
             assert_eq!(scaled[l], a[l] * b[l].y);
+        }
+    }
+
+    #[test]
+    fn point_gather_reads_the_points_asked_for() {
+        let values: Vec<Vec3> = (0..9).map(|k| vecs(k as f32)[k % LANES]).collect();
+        let points: Vec<Point4> = values.iter().map(|&v| Point4::new(v)).collect();
+        let at = [7, 0, 3, 8];
+        let lanes = Vec3x4::gather_points(&points, at).to_vecs();
+        for l in 0..LANES {
+            assert_eq!(lanes[l], values[at[l]]);
+            assert_eq!(points[at[l]].vec3(), values[at[l]]);
         }
     }
 

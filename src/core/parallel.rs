@@ -9,7 +9,7 @@
 
 use std::marker::PhantomData;
 
-use super::lanes::{LANES, Vec3x4};
+use super::lanes::{LANES, Point4, Vec3x4};
 use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Something that runs independent jobs, possibly on several threads.
@@ -100,20 +100,11 @@ impl<T: Copy> SharedSlice<'_, T> {
     }
 }
 
-impl SharedSlice<'_, glam::Vec3> {
-    /// The vectors at `at` in lanes, read as [`Vec3x4::gather_padded`] does (the slice needs
-    /// one vector more than the indices reach).
-    ///
-    /// # Safety
-    /// No job may write the slice while this reads it: it reads the whole slice, not only the
-    /// elements at `at` (the stage computing the clamp bounds, say, which only reads).
-    ///
-    /// [`Vec3x4::gather_padded`]: super::lanes::Vec3x4::gather_padded
+impl SharedSlice<'_, Point4> {
+    /// The points at `at` in lanes ([`Vec3x4::gather_points`]), each read as `get` reads it.
     #[inline(always)]
-    pub(crate) unsafe fn gather_padded(&self, at: [usize; LANES]) -> Vec3x4 {
-        // Safety: the caller's promise; `ptr` and `len` are those of the borrowed slice.
-        let values = unsafe { std::slice::from_raw_parts(self.ptr, self.len) };
-        Vec3x4::gather_padded(values, at)
+    pub(crate) fn gather(&self, at: [usize; LANES]) -> Vec3x4 {
+        Vec3x4::from_rows(at.map(|i| self.get(i).row()))
     }
 }
 

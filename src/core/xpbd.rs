@@ -21,6 +21,7 @@ use glam::Vec3;
 use super::body::SoftBodyState;
 use super::contacts::{ColliderInstance, RigidSphereState};
 use super::geometry::{signed_volume, volume_gradients};
+use super::lanes::Point4;
 use super::material::VolumeMethod;
 
 impl SoftBodyState {
@@ -52,7 +53,7 @@ impl SoftBodyState {
                 if self.inv_masses[i] > 0.0 {
                     self.velocities[i] += hs * gravity;
                 }
-                self.previews[i] = self.positions[i];
+                self.previews[i] = Point4::new(self.positions[i]);
                 self.positions[i] += hs * self.velocities[i];
             }
             if alpha.is_finite() {
@@ -61,14 +62,14 @@ impl SoftBodyState {
             self.project_volumes();
             // Velocities from the motion, then contacts on them from the substep's start.
             for i in 0..self.positions.len() {
-                let v = (self.positions[i] - self.previews[i]) / hs;
+                let v = (self.positions[i] - self.previews[i].vec3()) / hs;
                 if v.is_finite() {
                     self.velocities[i] = v;
                 } else {
                     self.velocities[i] = Vec3::ZERO;
                     self.counters.non_finite_velocities += 1;
                 }
-                self.positions[i] = self.previews[i];
+                self.positions[i] = self.previews[i].vec3();
             }
             // Each sphere where it is at this substep's start, then back exactly where it was.
             self.sphere_positions.clear();
