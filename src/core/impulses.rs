@@ -335,8 +335,9 @@ pub(crate) struct ClampMotion {
 /// checks than the drifts they keep out of the bound).
 const FAR_DRIFT: f32 = 1.0;
 
-/// One pass number per particle (see [`ClampMotion::far_nearby`]), written by the tasks of a
-/// pass at once (two tasks can mark the same particle), hence atomic. A clone starts unmarked.
+/// One number per particle or tet, the pass or walk that last marked it (see
+/// [`ClampMotion::far_nearby`] and [`ClampMotion::walked`]), written by the tasks of a pass at
+/// once (two tasks can mark the same one), hence atomic. A clone starts unmarked.
 #[derive(Debug, Default)]
 pub(crate) struct PassMarks(Vec<AtomicU32>);
 
