@@ -103,6 +103,16 @@ pub(crate) struct ClampBounds {
     /// Whether the next bounds taken (by a one-ring pass) are to cover the tets' regions too,
     /// for the per-tet pass after it.
     keep_for_tets: bool,
+    /// Whether the bounds were last taken by a one-ring pass, so that a later step's one-ring
+    /// pass may go on from them (see [`ClampBounds::still_hold`]), and whether they cover the
+    /// tets' regions too.
+    kept: bool,
+    kept_tet_regions: bool,
+    /// One-ring passes that went on from an earlier step's bounds (for tests).
+    pub(crate) carried_passes: u32,
+    /// Go on from an earlier step's bounds however far the particles are from their start (to
+    /// test that the result does not depend on it).
+    pub(crate) always_carry: bool,
     tet_radius: Vec<f32>,
     vertex_radius: Vec<f32>,
     /// The radius of each vertex's ring region ([`ClampRegions::Rings`]).
@@ -113,7 +123,45 @@ pub(crate) struct ClampBounds {
     start: Vec<Vec3>,
 }
 
+/// A one-ring pass goes on from the bounds an earlier step's one-ring pass took when no particle
+/// has drifted from where they were taken by more than this fraction of its vertex radius: a
+/// body at rest, or nearly, whose particles come back to about the same previews step after
+/// step. The bounds hold however far the particles have gone (drifts are measured from their
+/// start, as for the per-tet pass), but the further they start from it, the fewer impulses they
+/// clear at once, so a moving body takes them afresh.
+///
+/// Taking the bounds was about a fifth of the step of a 1080-tet box resting on the ground. In
+/// that box, over 600 steps, 0.125 / 0.25 / 0.5 / 1 of the radius let 68 / 241 / 400 / 491 passes
+/// go on, and the ring pass took 43-49 / 43 / 40-42 / 38-40 us against 48 (each run twice or
+/// more, interleaved); the soft cube under its sphere, the creature and the plastic block took
+/// as long with 0.5 or 1 as without; `bench`'s 16 bodies 0.92-1.04 -> 0.78-0.81 ms and its
+/// 8640-tet box 0.39-0.40 -> 0.30-0.31 with 0.5 (one thread, three runs each). 0.5 leaves half of
+/// each radius to the pass itself.
+pub const CARRY_DRIFT: f32 = 0.5;
+
 impl ClampBounds {
+    /// Whether the kept bounds still hold for a one-ring pass from `previews` (the tets'
+    /// regions too if `need_tet_regions`): see [`CARRY_DRIFT`]. A vertex without a positive
+    /// radius, or a broken preview, asks for new bounds.
+    fn still_hold(&self, need_tet_regions: bool, previews: &[Point4]) -> bool {
+        self.kept
+            && (self.kept_tet_regions || !need_tet_regions)
+            && (self.always_carry || self.near_start(previews))
+    }
+
+    /// Whether every particle is within [`CARRY_DRIFT`] of its vertex radius of the bounds'
+    /// start.
+    fn near_start(&self, previews: &[Point4]) -> bool {
+        previews
+            .iter()
+            .zip(&self.start)
+            .zip(&self.vertex_radius)
+            .all(|((p, &start), &radius)| {
+                let limit = CARRY_DRIFT * radius;
+                limit > 0.0 && (p.vec3() - start).length_squared() <= limit * limit
+            })
+    }
+
     /// The arrays, for the jobs of a pass to fill and then read (see [`BoundsView`]).
     fn view(&mut self, regions: ClampRegions) -> BoundsView<'_> {
         BoundsView {
@@ -736,11 +784,21 @@ impl SoftBodyState {
             worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
         }
         let clamp_regions = clamp_regions.filter(|_| !self.clamp_bounds.disabled);
+        let take_tet_regions =
+            clamp_regions == Some(ClampRegions::Tets) || self.clamp_bounds.keep_for_tets;
+        self.clamp_bounds.keep_for_tets = false;
         // A per-tet pass after its step's one-ring pass goes on from the bounds that pass took
         // (they hold as long as drifts are measured from where they were taken): it only
         // measures each particle's drift again. Taking them costs about as much as the
-        // per-tet pass's impulses in the soft cube.
-        let carry = clamp_regions == Some(ClampRegions::Tets) && self.clamp_bounds.taken_this_step;
+        // per-tet pass's impulses in the soft cube. A one-ring pass goes on from an earlier
+        // step's while the body has hardly moved since (see `CARRY_DRIFT`).
+        let carry = match clamp_regions {
+            Some(ClampRegions::Tets) => self.clamp_bounds.taken_this_step,
+            Some(ClampRegions::Rings) => self
+                .clamp_bounds
+                .still_hold(take_tet_regions, &self.previews),
+            None => false,
+        };
         let blocks = self.mesh.blocks();
         if clamp_regions.is_some() {
             self.clamp_bounds
@@ -748,9 +806,6 @@ impl SoftBodyState {
             self.clamp_bounds.active = true;
             self.clamp_motion.next_pass();
         }
-        let take_tet_regions =
-            clamp_regions == Some(ClampRegions::Tets) || self.clamp_bounds.keep_for_tets;
-        self.clamp_bounds.keep_for_tets = false;
         {
             let mesh = &*self.mesh;
             let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
@@ -878,8 +933,22 @@ impl SoftBodyState {
             });
         }
         self.clamp_bounds.active = false;
-        if clamp_regions.is_some() && !carry {
-            self.clamp_bounds.taken_this_step = take_tet_regions;
+        let bounds = &mut self.clamp_bounds;
+        match (clamp_regions, carry) {
+            (Some(ClampRegions::Rings), false) => {
+                bounds.taken_this_step = take_tet_regions;
+                (bounds.kept, bounds.kept_tet_regions) = (true, take_tet_regions);
+            }
+            (Some(ClampRegions::Rings), true) => {
+                bounds.taken_this_step = bounds.kept_tet_regions;
+                bounds.carried_passes += 1;
+            }
+            // Taken by a per-tet pass, without the rings' regions.
+            (Some(ClampRegions::Tets), false) => {
+                bounds.taken_this_step = true;
+                bounds.kept = false;
+            }
+            _ => {}
         }
         let c = &mut self.counters;
         for worker in &self.pass_workers {
@@ -1961,6 +2030,56 @@ mod tests {
             clamped += exact.counters().tets_clamped;
         }
         assert!(clamped > 0, "no per-tet impulse was clamped");
+    }
+
+    /// A one-ring pass may go on from an earlier step's bounds (see `CARRY_DRIFT`): made to
+    /// do so every step, however far the particles have moved, over steps of bodies shaken
+    /// gently and hard with pushes now and then, the passes clamp exactly as the walk without
+    /// bounds does; and by the rule, a body shaken gently goes on from earlier bounds, one
+    /// shaken hard takes new ones.
+    #[test]
+    fn one_ring_passes_going_on_from_earlier_steps_bounds_change_nothing() {
+        let (mut carried, mut clamped) = (0, 0);
+        for strength in [0.02, 0.2, 2.0, 6.0] {
+            let mut fast = shaken_body(strength);
+            let mut exact = fast.clone();
+            let mut by_rule = fast.clone();
+            fast.clamp_bounds.always_carry = true;
+            exact.clamp_bounds.disabled = true;
+            for step in 0..8 {
+                for body in [&mut fast, &mut exact, &mut by_rule] {
+                    body.begin_step();
+                    body.one_ring_pass(H, &mut []);
+                    body.per_tet_pass(H, &mut []);
+                    body.integrate_positions(H);
+                    if step % 4 == 3 {
+                        for v in body.velocities.iter_mut().step_by(5) {
+                            *v += Vec3::new(0.3, -1.0, 0.2) * strength;
+                        }
+                    }
+                }
+                for body in [&fast, &by_rule] {
+                    assert_eq!(body.velocities, exact.velocities, "{strength}, step {step}");
+                    assert_eq!(body.positions, exact.positions, "{strength}, step {step}");
+                }
+                clamped += exact.counters().rings_clamped + exact.counters().tets_clamped;
+            }
+            carried += fast.clamp_bounds.carried_passes;
+            let by_rule = by_rule.clamp_bounds.carried_passes;
+            if strength < 0.1 {
+                assert!(by_rule > 0, "{strength}: a gentle body never went on");
+            } else if strength > 1.0 {
+                assert!(
+                    by_rule < 7,
+                    "{strength}: a body shaken hard went on {by_rule} times"
+                );
+            }
+        }
+        assert!(
+            carried >= 28,
+            "{carried} passes went on from an earlier step's bounds"
+        );
+        assert!(clamped > 0, "no impulse was clamped");
     }
 
     /// A body at rest with one interior particle thrown, before the one-ring pass or between
