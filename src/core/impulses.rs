@@ -941,7 +941,7 @@ impl SoftBodyState {
             }
             (Some(ClampRegions::Rings), true) => {
                 bounds.taken_this_step = bounds.kept_tet_regions;
-                bounds.carried_passes += 1;
+                bounds.carried_passes = bounds.carried_passes.saturating_add(1);
             }
             // Taken by a per-tet pass, without the rings' regions.
             (Some(ClampRegions::Tets), false) => {
