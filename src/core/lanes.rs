@@ -94,13 +94,10 @@ impl Vec3x4 {
         // vectors are `3 * len` numbers one after another.
         let flat: &[f32] =
             unsafe { std::slice::from_raw_parts(values.as_ptr().cast::<f32>(), 3 * values.len()) };
-        let row = |l: usize| {
-            let start = 3 * at[l];
-            let four: [f32; 4] = flat[start..start + 4].try_into().expect("four numbers");
+        Vec3x4::from_rows(at.map(|i| {
+            let four: [f32; 4] = flat[3 * i..3 * i + 4].try_into().expect("four numbers");
             f32x4::new(four)
-        };
-        let [x, y, z, _] = f32x4::transpose([row(0), row(1), row(2), row(3)]);
-        Vec3x4 { x, y, z }
+        }))
     }
 
     /// The positions `points[at[l]]` in lane `l`: four loads and a transpose.

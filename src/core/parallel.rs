@@ -8,9 +8,9 @@
 //! [`Parallel`] (the plugin's runs jobs on Bevy's compute task pool).
 
 use std::marker::PhantomData;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 use super::lanes::{LANES, Point4, Vec3x4};
-use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Something that runs independent jobs, possibly on several threads.
 pub trait Parallel: Sync {
