@@ -8,7 +8,8 @@
 //! settling on the ground, and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is
 //! the wall-clock time of the plugin's stages per 10 ms step, all bodies together
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
-//! between the stages is not in it. `--threads N` sizes Bevy's task pools; `--only NAME` runs the
+//! between the stages is not in it. `--threads N` sizes Bevy's task pools (`--threads-sleep` lets
+//! them sleep between the stages: `SoftBodyThreads::keep_awake` off); `--only NAME` runs the
 //! scenes whose name contains NAME. Timings are for comparing runs on one machine; the criterion
 //! benches (`cargo bench`) time single steps with statistics.
 
@@ -25,6 +26,8 @@ struct Args {
     threads: usize,
     only: Option<String>,
     xpbd_substeps: u32,
+    /// `SoftBodyThreads::keep_awake` (off with `--threads-sleep`).
+    keep_awake: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -33,6 +36,7 @@ fn parse_args() -> Result<Args, String> {
         threads: 1,
         only: None,
         xpbd_substeps: 10,
+        keep_awake: true,
     };
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -53,9 +57,10 @@ fn parse_args() -> Result<Args, String> {
                     .filter(|n| (1..=1000).contains(n))
                     .ok_or(format!("--xpbd-substeps: `{n}` is not 1 to 1000"))?;
             }
+            "--threads-sleep" => parsed.keep_awake = false,
             "--bench" => {} // passed by `cargo bench`-style runners; nothing to do
             "-h" | "--help" => {
-                return Err("usage: bench [--threads N] [--only NAME] [--xpbd-substeps N]".into());
+                return Err("usage: bench [--threads N] [--threads-sleep] [--only NAME] [--xpbd-substeps N]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -65,7 +70,7 @@ fn parse_args() -> Result<Args, String> {
 
 /// A headless app with `threads` threads in Bevy's compute task pool (where the systems and the
 /// bodies run; the IO and async pools get one each besides), stepping 10 ms per update.
-fn app(threads: usize) -> App {
+fn app(threads: usize, keep_awake: bool) -> App {
     let mut options = TaskPoolOptions::with_num_threads(threads + 2);
     options.compute.min_threads = threads;
     options.compute.max_threads = threads;
@@ -79,7 +84,8 @@ fn app(threads: usize) -> App {
     ))
     .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
         Duration::from_millis(10),
-    ));
+    ))
+    .insert_resource(SoftBodyThreads { keep_awake });
     app
 }
 
@@ -127,7 +133,7 @@ fn main() {
             continue;
         }
         for method in methods {
-            let mut app = app(args.threads);
+            let mut app = app(args.threads, args.keep_awake);
             {
                 let world = app.world_mut();
                 let mut commands = world.commands();
@@ -154,7 +160,7 @@ fn main() {
             continue;
         }
         for method in methods {
-            let mut app = app(args.threads);
+            let mut app = app(args.threads, args.keep_awake);
             let mesh = box_grid(cells, Vec3::splat(0.1), Vec3::ZERO).expect("a valid grid");
             let material = PaperScene::Creature.material(method);
             let world = app.world_mut();
@@ -172,7 +178,7 @@ fn main() {
     // Many bodies: 16 cubes of 6^3 cells side by side (bodies do not collide with each other).
     if wanted("bodies_16") {
         for method in methods {
-            let mut app = app(args.threads);
+            let mut app = app(args.threads, args.keep_awake);
             let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(6), Vec3::splat(0.1), Vec3::ZERO)
                 .expect("a valid grid")
                 .into();

@@ -26,6 +26,7 @@
 
 pub mod components;
 pub mod core;
+mod crew;
 #[cfg(feature = "render")]
 pub mod debug;
 #[cfg(feature = "egui")]
@@ -46,7 +47,7 @@ pub use loading::{
     ObjMeshLoader, SoftBodyAssetPlugin, SoftBodyAssetSet, SoftBodyFromAsset, SoftBodySource,
     TetGenLoader, TetMeshAsset,
 };
-pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyStepTime, SoftBodyTiming};
+pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyStepTime, SoftBodyThreads, SoftBodyTiming};
 #[cfg(feature = "render")]
 pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSet, surface_mesh};
 
@@ -61,7 +62,7 @@ pub mod prelude {
     pub use crate::loading::{
         SoftBodyAssetPlugin, SoftBodyFromAsset, SoftBodySource, TetMeshAsset,
     };
-    pub use crate::plugin::{SoftBodyPlugin, SoftBodySet};
+    pub use crate::plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyThreads};
     #[cfg(feature = "render")]
     pub use crate::surface::{SoftBodySurface, SoftBodySurfacePlugin};
 }

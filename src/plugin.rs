@@ -14,6 +14,7 @@ use crate::components::{
     SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
 use crate::core::{ColliderInstance, Parallel, RigidSphereState, Serial, SoftBodyState, TetMesh};
+use crate::crew;
 
 /// The stages of a step, run in this order in the plugin's schedule (see `core::body` for what
 /// each does and why in this order).
@@ -90,6 +91,8 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<RigidSphere>()
             .init_resource::<SolverSpheres>()
             .init_resource::<SoftBodyStepTime>()
+            .init_resource::<SoftBodyThreads>()
+            .register_type::<SoftBodyThreads>()
             .register_type::<SoftBodyStepTime>()
             .add_message::<SoftBodyError>();
         if let Some(step) = self.time_step
@@ -154,7 +157,16 @@ fn prepare(
     mut bodies: Query<PreparedBody>,
     targets: Query<&Transform, Without<SoftBody>>,
     mut errors: MessageWriter<SoftBodyError>,
+    threads: Res<SoftBodyThreads>,
 ) {
+    if threads.keep_awake {
+        // First, so that the crew is awake by the first parallel section.
+        muster_crew(
+            bodies
+                .iter()
+                .map(|(_, body, ..)| body.state.mesh().tet_count()),
+        );
+    }
     for (entity, mut body, mut transform, pinned, driven) in &mut bodies {
         let body = &mut *body;
         if !body.placed {
@@ -267,6 +279,8 @@ pub struct SolverSpheres {
     /// The spheres as they were before the stage running now (see [`par_with_spheres`]).
     before: Vec<RigidSphereState>,
     colliders: Vec<ColliderInstance>,
+    /// The bodies' entities, in query order (scratch of [`for_each_body`]).
+    bodies: Vec<Entity>,
 }
 
 /// Wall-clock time of the plugin's stages for all bodies together: what a frame pays for the
@@ -312,12 +326,16 @@ fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState
     }
 }
 
-/// Runs the independent jobs of a volume pass (its blocks, see `core::parallel`) on Bevy's
-/// compute task pool.
+/// Runs independent jobs (bodies, or the blocks of a volume pass, see `core::parallel`) on the
+/// threads of Bevy's compute task pool: the crew's when it is on duty (see [`crate::crew`]),
+/// else as tasks of the pool.
 struct ComputePool;
 
 impl Parallel for ComputePool {
     fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync)) {
+        if jobs > 1 && crew::BOARD.run(jobs, job) {
+            return;
+        }
         match bevy::tasks::ComputeTaskPool::try_get() {
             Some(pool) if jobs > 1 && pool.thread_num() > 1 => {
                 pool.scope(|scope| {
@@ -334,6 +352,47 @@ impl Parallel for ComputePool {
         // The thread calling `scope` (a pool thread, when a system runs on one) works too;
         // asking for more jobs than the pool has threads would only make them take turns.
         bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num())
+    }
+}
+
+/// How the steps use the threads of Bevy's compute task pool.
+#[derive(Resource, Clone, Copy, Debug, Reflect)]
+#[reflect(Resource)]
+pub struct SoftBodyThreads {
+    /// Keep the pool's other threads awake through each step that has work for them (several
+    /// bodies, or a body large enough for its passes to run in parallel): they wait for the
+    /// step's parallel sections spinning instead of asleep, so no section waits for a thread to
+    /// wake up (see `crew.rs`). On by default; off, the threads sleep between the sections:
+    /// less CPU time spent, a longer step when there are several threads.
+    pub keep_awake: bool,
+}
+
+impl Default for SoftBodyThreads {
+    fn default() -> Self {
+        SoftBodyThreads { keep_awake: true }
+    }
+}
+
+/// Puts the crew on duty for this step if it has parallel work: two bodies or more, or one of
+/// at least [`PARALLEL_PASS_MIN_TETS`] tets; every thread of the compute pool but one (the
+/// step's own systems need one) becomes a member.
+fn muster_crew(tet_counts: impl Iterator<Item = usize>) {
+    let Some(pool) = bevy::tasks::ComputeTaskPool::try_get() else {
+        return;
+    };
+    if pool.thread_num() < 2 {
+        return;
+    }
+    let (mut bodies, mut largest) = (0, 0);
+    for tets in tet_counts {
+        bodies += 1;
+        largest = largest.max(tets);
+    }
+    if bodies < 2 && largest < PARALLEL_PASS_MIN_TETS {
+        return;
+    }
+    for _ in 0..crew::BOARD.muster(pool.thread_num() - 1) {
+        pool.spawn(crew::BOARD.member()).detach();
     }
 }
 
@@ -360,31 +419,46 @@ fn pass_parallelism(few_bodies: bool, body: &SoftBodyState) -> &'static dyn Para
 /// `bodies_16`). A body's stage is long enough (tens of microseconds) for a task each.
 const ONE_BODY_PER_TASK: BatchingStrategy = BatchingStrategy::fixed(1);
 
+/// The bodies as the stages of a step see them.
+type Bodies<'w, 's> = Query<'w, 's, (Entity, &'static mut SoftBody, &'static mut SoftBodyStats)>;
+
 /// Whether there are fewer bodies than compute threads.
-fn few_bodies(bodies: &Query<(&mut SoftBody, &mut SoftBodyStats)>) -> bool {
+fn few_bodies(bodies: &Bodies) -> bool {
     let threads = bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num());
     bodies.iter().count() < threads
 }
 
-/// Runs `run` on every body: one body per task on the compute task pool, or a single body on
-/// this thread (not handed to another, which may first have to wake up).
+/// Runs `run` on every body: one body per job on the compute task pool's threads (the crew's,
+/// see [`crate::crew`]), or a single body on this thread (not handed to another, which may first
+/// have to wake up). `order` is scratch for the bodies' entities.
 fn for_each_body(
-    bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
-    run: impl Fn((Mut<SoftBody>, Mut<SoftBodyStats>)) + Send + Sync + Clone,
+    bodies: &mut Bodies,
+    order: &mut Vec<Entity>,
+    run: impl Fn((Mut<SoftBody>, Mut<SoftBodyStats>)) + Send + Sync,
 ) {
-    if bodies.iter().len() == 1 {
-        bodies.iter_mut().for_each(run);
-    } else {
+    order.clear();
+    order.extend(bodies.iter().map(|(entity, _, _)| entity));
+    if order.len() == 1 {
         bodies
-            .par_iter_mut()
-            .batching_strategy(ONE_BODY_PER_TASK)
-            .for_each(run);
+            .iter_mut()
+            .for_each(|(_, body, stats)| run((body, stats)));
+        return;
     }
+    let bodies = &*bodies;
+    let order = &*order;
+    ComputePool.run(order.len(), &|i| {
+        // SAFETY: each job reaches its own entity (`order` lists each body once), and this
+        // function borrows the query mutably while the jobs run, so nothing else reaches it.
+        if let Ok((_, body, stats)) = unsafe { bodies.get_unchecked(order[i]) } {
+            run((body, stats));
+        }
+    });
 }
 
 /// Runs `stage` on every body, in parallel on the compute task pool, timing each body.
 fn par_bodies(
-    bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    bodies: &mut Bodies,
+    order: &mut Vec<Entity>,
     stage: impl Fn(&mut SoftBodyState, &mut SoftBodyStats) + Send + Sync,
 ) {
     let run = |(mut body, mut stats): (Mut<SoftBody>, Mut<SoftBodyStats>)| {
@@ -393,7 +467,7 @@ fn par_bodies(
         stage(&mut body.state, &mut stats);
         body.step_time += start.elapsed();
     };
-    for_each_body(bodies, run);
+    for_each_body(bodies, order, run);
 }
 
 /// Runs `pass` on every body in parallel, each against its own copy of the spheres as they were
@@ -403,7 +477,7 @@ fn par_bodies(
 /// threads; with one body it is exactly the serial result. `pass` adds its contacts to the
 /// stats.
 fn par_with_spheres(
-    bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    bodies: &mut Bodies,
     solver: &mut SolverSpheres,
     pass: impl Fn(&mut SoftBodyState, &mut SoftBodyStats, &mut [RigidSphereState], &[ColliderInstance])
     + Send
@@ -420,11 +494,11 @@ fn par_with_spheres(
         pass(&mut body.state, &mut stats, &mut body.spheres, colliders);
         body.step_time += start.elapsed();
     };
-    for_each_body(bodies, run);
+    for_each_body(bodies, &mut solver.bodies, run);
     if solver.states.is_empty() {
         return;
     }
-    for (k, (body, _)) in bodies.iter().enumerate() {
+    for (k, (_, body, _)) in bodies.iter().enumerate() {
         for ((sphere, mine), old) in solver.states.iter_mut().zip(&body.spheres).zip(before) {
             if k == 0 {
                 sphere.velocity = mine.velocity;
@@ -440,7 +514,7 @@ fn apply_forces(
     gravity: Res<SoftBodyGravity>,
     mut solver_spheres: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    mut bodies: Bodies,
     spheres: Query<(Entity, &RigidSphere, &Transform)>,
     collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
@@ -451,10 +525,10 @@ fn apply_forces(
     let start = Instant::now();
     let g = gravity.0;
     let few = few_bodies(&bodies);
-    par_bodies(&mut bodies, |s, _| {
+    let solver_spheres = &mut *solver_spheres;
+    par_bodies(&mut bodies, &mut solver_spheres.bodies, |s, _| {
         s.apply_forces_on(h, g, pass_parallelism(few, s))
     });
-    let solver_spheres = &mut *solver_spheres;
     solver_spheres.entities.clear();
     solver_spheres.states.clear();
     for (entity, sphere, transform) in &spheres {
@@ -483,7 +557,7 @@ fn apply_forces(
 fn contact_pass(
     h: f32,
     solver: &mut SolverSpheres,
-    bodies: &mut Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    bodies: &mut Bodies,
     after: impl Fn(&mut SoftBodyState, &mut SoftBodyStats) + Send + Sync,
 ) {
     for sphere in solver.states.iter_mut() {
@@ -502,14 +576,14 @@ fn resolve_contacts(
     time: Res<Time>,
     mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    mut bodies: Bodies,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
     let start = Instant::now();
-    for (_, mut stats) in &mut bodies {
+    for (_, _, mut stats) in &mut bodies {
         stats.contacts = 0;
     }
     contact_pass(h, &mut solver, &mut bodies, |_, _| {});
@@ -520,7 +594,7 @@ fn one_ring(
     time: Res<Time>,
     mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    mut bodies: Bodies,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -539,7 +613,7 @@ fn per_tet(
     time: Res<Time>,
     mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    mut bodies: Bodies,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -555,8 +629,9 @@ fn per_tet(
 
 fn plasticity(
     time: Res<Time>,
+    mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    mut bodies: Bodies,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -565,12 +640,14 @@ fn plasticity(
     // Without plastic bodies, not even a parallel section (waking threads for nothing).
     if bodies
         .iter()
-        .all(|(body, _)| body.state.material().plasticity.is_none())
+        .all(|(_, body, _)| body.state.material().plasticity.is_none())
     {
         return;
     }
     let start = Instant::now();
-    par_bodies(&mut bodies, |s, _| s.apply_plasticity(h));
+    par_bodies(&mut bodies, &mut solver.bodies, |s, _| {
+        s.apply_plasticity(h)
+    });
     clock.current += start.elapsed();
 }
 
@@ -578,9 +655,12 @@ fn integrate(
     time: Res<Time>,
     mut solver_spheres: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Query<(&mut SoftBody, &mut SoftBodyStats)>,
+    mut bodies: Bodies,
     mut spheres: Query<(&mut RigidSphere, &mut Transform), Without<StaticCollider>>,
 ) {
+    // The crew stays while the last section (below) runs: dismissed members finish the
+    // posting they are in, and take no other.
+    let _dismiss = DismissCrew;
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
@@ -607,6 +687,15 @@ fn integrate(
     clock.total_ms += clock.last_ms;
     clock.steps += 1;
     clock.current = Duration::ZERO;
+}
+
+/// Dismisses the crew when dropped: at the end of a step, however it ends.
+struct DismissCrew;
+
+impl Drop for DismissCrew {
+    fn drop(&mut self) {
+        crew::BOARD.dismiss();
+    }
 }
 
 fn writeback(mut bodies: Query<(&SoftBody, &mut SoftBodyStats, &mut Transform)>) {
