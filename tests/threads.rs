@@ -1,5 +1,6 @@
 //! Results do not depend on the number of threads: the same scene, stepped with 1, 2 and 4
-//! threads in Bevy's task pools, ends bit for bit the same, both for several bodies sharing a
+//! threads in Bevy's task pools (kept awake through the steps, and on two threads also left to
+//! sleep between the stages: `SoftBodyThreads::keep_awake`), ends bit for bit the same, both for several bodies sharing a
 //! sphere (bodies in parallel) and for one large body (its blocks in parallel). The pools are
 //! global to a process, so each thread count runs in a child process (this test binary again,
 //! told by an environment variable what to do).
@@ -17,7 +18,7 @@ const CHILD: &str = "BEVY_SOFT_BODY_THREADS_CHILD";
 /// Steps four bodies (two methods), a sphere landing across two of them and the ground, or
 /// (`one_body`) one body of 8640 tets with a sphere landing on it, and returns every particle's
 /// and the sphere's final position, as bits.
-fn simulate(threads: usize, one_body: bool) -> Vec<u32> {
+fn simulate(threads: usize, keep_awake: bool, one_body: bool) -> Vec<u32> {
     // `threads` threads in the compute pool, where the systems and the bodies run.
     let mut options = TaskPoolOptions::with_num_threads(threads + 2);
     options.compute.min_threads = threads;
@@ -32,7 +33,8 @@ fn simulate(threads: usize, one_body: bool) -> Vec<u32> {
     .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
         Duration::from_millis(10),
     ))
-    .insert_resource(SoftBodyGravity(Vec3::new(0.0, -2.0, 0.0)));
+    .insert_resource(SoftBodyGravity(Vec3::new(0.0, -2.0, 0.0)))
+    .insert_resource(SoftBodyThreads { keep_awake });
     if one_body {
         let mesh = box_grid(UVec3::splat(12), Vec3::splat(0.05), Vec3::ZERO).unwrap();
         // Enough blocks for every thread.
@@ -93,20 +95,25 @@ fn simulate(threads: usize, one_body: bool) -> Vec<u32> {
     bits
 }
 
-/// Runs `test` in a child process per thread count (1, 2, 4) and checks that all agree.
+/// Runs `test` in a child process per thread count (1, 2, 4, and 2 asleep between the stages)
+/// and checks that all agree.
 fn compare_thread_counts(test: &str, one_body: bool) {
     if let Ok(threads) = std::env::var(CHILD) {
-        let bits = simulate(threads.parse().unwrap(), one_body);
+        let (threads, keep_awake) = match threads.strip_suffix(" asleep") {
+            Some(threads) => (threads, false),
+            None => (threads.as_str(), true),
+        };
+        let bits = simulate(threads.parse().unwrap(), keep_awake, one_body);
         let hash = bits.iter().fold(0xcbf29ce484222325u64, |h, &b| {
             (h ^ b as u64).wrapping_mul(0x100000001b3)
         });
         println!("result {} {hash:016x}", bits.len());
         return;
     }
-    let run = |threads: usize| {
+    let run = |threads: &str| {
         let out = Command::new(std::env::current_exe().unwrap())
             .args([test, "--exact", "--nocapture"])
-            .env(CHILD, threads.to_string())
+            .env(CHILD, threads)
             .output()
             .unwrap();
         let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
@@ -119,9 +126,9 @@ fn compare_thread_counts(test: &str, one_body: bool) {
             .find_map(|l| l.strip_prefix("result ").map(str::to_owned))
             .unwrap_or_else(|| panic!("no result from the child with {threads} threads"))
     };
-    let one = run(1);
+    let one = run("1");
     assert!(one.split(' ').next().unwrap().parse::<usize>().unwrap() > 1000);
-    for threads in [2, 4] {
+    for threads in ["2", "4", "2 asleep"] {
         assert_eq!(run(threads), one, "{threads} threads differ from one");
     }
 }
