@@ -73,14 +73,17 @@ pub(crate) struct Board {
     on_duty: AtomicBool,
     /// Members spawned and not yet gone.
     members: AtomicUsize,
+    /// How long a member waits for work before it leaves ([`IDLE_LIMIT`] but in tests).
+    idle_limit: Duration,
 }
 
 /// The board of the compute task pool's crew (one pool per process, so one board).
-pub(crate) static BOARD: Board = Board::new();
+pub(crate) static BOARD: Board = Board::new(IDLE_LIMIT);
 
 impl Board {
-    const fn new() -> Board {
+    const fn new(idle_limit: Duration) -> Board {
         Board {
+            idle_limit,
             postings: AtomicUsize::new(0),
             posting: Mutex::new(None),
             next: AtomicUsize::new(0),
@@ -211,7 +214,7 @@ impl Board {
     }
 
     /// A crew member: takes the jobs of every posting until dismissed or idle for
-    /// [`IDLE_LIMIT`], letting the pool run its other tasks every [`YIELD_EVERY`] of waiting.
+    /// [`IDLE_LIMIT`] (the board's idle limit), letting the pool run its other tasks every [`YIELD_EVERY`] of waiting.
     pub(crate) async fn member(&self) {
         let mut seen = self.postings.load(Ordering::Acquire).wrapping_sub(1);
         let mut idle_since = Instant::now();
@@ -231,7 +234,7 @@ impl Board {
             spins = spins.wrapping_add(1);
             if spins.is_multiple_of(64) {
                 let now = Instant::now();
-                if now - idle_since > IDLE_LIMIT {
+                if now - idle_since > self.idle_limit {
                     break;
                 }
                 if now - last_yield > YIELD_EVERY {
@@ -249,16 +252,29 @@ mod tests {
     use super::*;
     use std::sync::atomic::AtomicU32;
 
-    /// Every job of every posting runs exactly once, whoever takes it, with members joining
-    /// and leaving; a board without a crew on duty runs nothing and says so.
-    #[test]
-    fn every_job_runs_once_on_the_posting_thread_or_a_member() {
-        let board: &'static Board = Box::leak(Box::new(Board::new()));
-        assert!(!board.run(3, &|_| panic!("no crew: nothing may run")));
+    /// A board of its own (the process's is shared by every test) with a crew of `members` on
+    /// threads of their own, for `test`; dismissed afterwards, when every member has left.
+    /// Members wait for work as long as the test runs: tests share two cores, and a test
+    /// thread can be kept waiting longer than [`IDLE_LIMIT`], which would send them away.
+    fn with_crew(members: usize, test: impl FnOnce(&'static Board)) -> &'static Board {
+        let board: &'static Board = Box::leak(Box::new(Board::new(Duration::from_secs(3600))));
         std::thread::scope(|scope| {
-            for _ in 0..board.muster(2) {
+            for _ in 0..board.muster(members) {
                 scope.spawn(|| bevy::tasks::block_on(board.member()));
             }
+            test(board);
+            board.dismiss();
+        });
+        board
+    }
+
+    /// Every job of every posting runs exactly once, whoever takes it, with members joining
+    /// as their threads start; a board without a crew on duty runs nothing and says so.
+    #[test]
+    fn every_job_runs_once_on_the_posting_thread_or_a_member() {
+        let idle = Board::new(IDLE_LIMIT);
+        assert!(!idle.run(3, &|_| panic!("no crew: nothing may run")));
+        let board = with_crew(2, |board| {
             for round in 0..2000usize {
                 let jobs = round % 7;
                 let counts: Vec<AtomicU32> = (0..jobs).map(|_| AtomicU32::new(0)).collect();
@@ -268,7 +284,6 @@ mod tests {
                 assert!(ran, "the crew is on duty");
                 assert!(counts.iter().all(|c| c.load(Ordering::Relaxed) == 1));
             }
-            board.dismiss();
         });
         assert_eq!(board.members.load(Ordering::Acquire), 0);
         assert!(!board.run(1, &|_| panic!("dismissed: nothing may run")));
@@ -278,11 +293,7 @@ mod tests {
     /// pool's tasks), so sections nested in a job do not wait for the board.
     #[test]
     fn a_section_inside_a_job_is_refused_the_board() {
-        let board: &'static Board = Box::leak(Box::new(Board::new()));
-        std::thread::scope(|scope| {
-            for _ in 0..board.muster(1) {
-                scope.spawn(|| bevy::tasks::block_on(board.member()));
-            }
+        with_crew(1, |board| {
             let refused = AtomicU32::new(0);
             assert!(board.run(4, &|_| {
                 if !board.run(1, &|_| {}) {
@@ -290,7 +301,6 @@ mod tests {
                 }
             }));
             assert_eq!(refused.load(Ordering::Relaxed), 4);
-            board.dismiss();
         });
     }
 
@@ -298,11 +308,7 @@ mod tests {
     /// it forever, and the board stays usable.
     #[test]
     fn a_panic_on_a_member_reaches_the_posting_section() {
-        let board: &'static Board = Box::leak(Box::new(Board::new()));
-        std::thread::scope(|scope| {
-            for _ in 0..board.muster(1) {
-                scope.spawn(|| bevy::tasks::block_on(board.member()));
-            }
+        with_crew(1, |board| {
             let main = std::thread::current().id();
             let mut panicked = false;
             // Until a member takes the panicking job (the posting thread may take them all).
@@ -322,7 +328,6 @@ mod tests {
             }
             assert!(panicked, "a member took a job within 1000 postings");
             assert!(board.run(2, &|_| {}));
-            board.dismiss();
         });
     }
 }

@@ -125,9 +125,8 @@ pub(crate) struct ClampBounds {
 
 /// A one-ring pass goes on from the bounds an earlier step's one-ring pass took when no particle
 /// (but a few strays, see [`CARRY_STRAYS`]) has drifted from where they were taken by more than
-/// this fraction of its vertex radius: a
-/// body at rest, or nearly, whose particles come back to about the same previews step after
-/// step. The bounds hold however far the particles have gone (drifts are measured from their
+/// this fraction of its vertex radius: a body at rest, or nearly, whose particles come back to
+/// about the same previews step after step. The bounds hold however far the particles have gone (drifts are measured from their
 /// start, as for the per-tet pass), but the further they start from it, the fewer impulses they
 /// clear at once, so a moving body takes them afresh.
 ///
@@ -155,8 +154,7 @@ pub const CARRY_STRAYS: usize = 200;
 impl ClampBounds {
     /// Whether the kept bounds still hold for a one-ring pass from `previews` (the tets'
     /// regions too if `need_tet_regions`): see [`CARRY_DRIFT`] and [`CARRY_STRAYS`]. A vertex
-    /// without a positive
-    /// radius, or a broken preview, asks for new bounds.
+    /// without a positive radius, or a broken preview, asks for new bounds.
     fn still_hold(&self, need_tet_regions: bool, previews: &[Point4]) -> bool {
         self.kept
             && (self.kept_tet_regions || !need_tet_regions)
