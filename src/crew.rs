@@ -178,13 +178,10 @@ impl Board {
         // SAFETY: the posting section is waiting in `run` until `inside` drops back.
         let job = unsafe { &*posting.job };
         let result = catch_unwind(AssertUnwindSafe(|| self.take_jobs(posting.jobs, job)));
-        if let Err(panic) = result {
+        if result.is_err() {
             // Counted as done so the section stops waiting; it panics in turn.
             self.panicked.store(true, Ordering::Release);
             self.done.fetch_add(posting.jobs, Ordering::Release);
-            self.inside.fetch_sub(1, Ordering::AcqRel);
-            drop(panic);
-            return true;
         }
         self.inside.fetch_sub(1, Ordering::AcqRel);
         true
