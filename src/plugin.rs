@@ -271,7 +271,8 @@ fn prepare(
 /// The rigid spheres and static colliders as the solver sees them during one step, gathered
 /// once in [`SoftBodySet::Forces`]. The spheres are changed by the contact and volume passes
 /// (particles pressed against a sphere move it) and written back in [`SoftBodySet::Integrate`];
-/// the colliders do not move within a step. The buffers are reused, so a step does not allocate.
+/// the colliders do not move within a step. Also the bodies' entities, scratch for the parallel
+/// stages ([`for_each_body`]). The buffers are reused, so a step does not allocate.
 #[derive(Resource, Default)]
 pub struct SolverSpheres {
     entities: Vec<Entity>,
@@ -412,11 +413,10 @@ fn pass_parallelism(few_bodies: bool, body: &SoftBodyState) -> &'static dyn Para
     }
 }
 
-/// One body per task of a parallel query. Bevy's default splits the bodies into one batch per
-/// thread, which assumes they cost the same; a body resting on the ground costs about twice
-/// what a falling one does, and 16 bodies dropped one after another left one of two threads
-/// waiting for the other (two threads 1.2x faster than one in the `bench` example's
-/// `bodies_16`). A body's stage is long enough (tens of microseconds) for a task each.
+/// One body per task of [`writeback`]'s parallel query (the stages of a step run one body per
+/// job through [`for_each_body`] instead). Bevy's default splits the bodies into one batch per
+/// thread, which assumes they cost the same; they do not (a body resting on the ground costs
+/// about twice what a falling one does).
 const ONE_BODY_PER_TASK: BatchingStrategy = BatchingStrategy::fixed(1);
 
 /// The bodies as the stages of a step see them.
