@@ -533,6 +533,9 @@ pub(crate) struct ClampWork {
     /// Sized for the largest clamp region's vertices up front (a clone of a `Vec` with spare
     /// capacity has none, and the step must not allocate).
     unclear: Vec<u32>,
+    /// How far each ring vertex of the vertex being walked can get from its start (its drift
+    /// plus its own move), by the ring's local index; sized like `unclear`.
+    reach: Vec<f32>,
 }
 
 impl PassWorker {
@@ -542,6 +545,7 @@ impl PassWorker {
             ring_work: RingWork::for_mesh(mesh),
             clamp: ClampWork {
                 unclear: vec![0; mesh.max_ring_vertices()],
+                reach: vec![0.0; mesh.max_ring_vertices()],
             },
             ..Default::default()
         }
@@ -1509,7 +1513,7 @@ impl PassView<'_> {
                 counters.clamps_skipped += 1;
                 step
             } else {
-                self.clamp_unclear(unclear, step)
+                self.clamp_unclear(unclear, step, &mut work.reach)
             }
         } else {
             self.neighbour_clamp(whole_region, step)
@@ -1546,13 +1550,37 @@ impl PassView<'_> {
 
     /// The neighbour clamp over the one-rings of the `unclear` vertices of
     /// [`PassView::find_unclear`], each tet once (the one-rings overlap; see [`WalkMarks`]).
-    fn clamp_unclear(&self, unclear: &[u32], mut step: f64) -> f64 {
+    ///
+    /// Each tet is first held against its radius with the reach of its four particles, taken
+    /// from the ring's reaches (`reach`, one per ring vertex, computed once per vertex): the
+    /// same test `neighbour_clamp` starts with, but on data gathered for the ring instead of
+    /// from the body's arrays through each tet's vertex indices, and before the tet is marked
+    /// walked. Most tets of a walk pass it (nine in ten under the cube's sphere). The reaches
+    /// are taken with the step as it was when the vertex's walk began; a shorter step only
+    /// shortens them, and `neighbour_clamp` tests again with the current one, so the tets that
+    /// reach the cubics, and the result, are those of walking every tet.
+    fn clamp_unclear(&self, unclear: &[u32], mut step: f64, reach: &mut [f32]) -> f64 {
+        let (mesh, b) = (self.mesh, self.bounds);
         let walk = self.walks.start();
         for &v in unclear {
-            let ring = self.mesh.one_ring(v as usize).iter();
-            step = self.neighbour_clamp(ring.filter(|&&t| self.walks.first_visit(walk, t)), step);
-            if step == 0.0 {
-                break;
+            let v = v as usize;
+            let along = step as f32;
+            for (r, &i) in reach.iter_mut().zip(mesh.ring_vertices(v)) {
+                let i = i as usize;
+                *r = self.drift.get(i) + along * self.move_len.get(i);
+            }
+            for (&t, corners) in mesh.one_ring(v).iter().zip(mesh.ring_corners(v)) {
+                let tet_reach = corners
+                    .iter()
+                    .map(|&k| reach[k as usize])
+                    .fold(0.0f32, larger);
+                if tet_reach < b.tet_radius.get(t as usize) || !self.walks.first_visit(walk, t) {
+                    continue;
+                }
+                step = self.neighbour_clamp(std::iter::once(&t), step);
+                if step == 0.0 {
+                    return step;
+                }
             }
         }
         step
