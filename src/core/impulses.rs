@@ -372,9 +372,9 @@ pub(crate) struct ClampMotion {
     /// During a clamp walk, the length of each particle's direction (zero for particles the
     /// impulse does not move), so the walk reads one number per vertex.
     move_len: Vec<f32>,
-    /// For each tet, the number of the last clamp walk that looked at it (see
-    /// [`PassView::clamp_unclear`]): one-rings of the walked vertices overlap, and a tet is
-    /// looked at once per walk.
+    /// For each tet, the number of the last clamp walk that looked at it past its radius (see
+    /// [`PassView::clamp_unclear`]): one-rings of the walked vertices overlap, and a tet the
+    /// radius does not clear is looked at once per walk.
     walked: PassMarks,
     /// The number of the last clamp walk (from 1), shared by the tasks of a pass.
     walks: WalkCount,
