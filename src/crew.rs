@@ -211,7 +211,8 @@ impl Board {
     }
 
     /// A crew member: takes the jobs of every posting until dismissed or idle for
-    /// [`IDLE_LIMIT`] (the board's idle limit), letting the pool run its other tasks every [`YIELD_EVERY`] of waiting.
+    /// [`IDLE_LIMIT`] (the board's idle limit), letting the pool run its other tasks every
+    /// [`YIELD_EVERY`] of waiting.
     pub(crate) async fn member(&self) {
         let mut seen = self.postings.load(Ordering::Acquire).wrapping_sub(1);
         let mut idle_since = Instant::now();
