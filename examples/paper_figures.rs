@@ -3,10 +3,15 @@
 //! headless app, and writes the paper's Figure 2 and the numbers behind it.
 //!
 //! ```text
-//! cargo run --release --all-features --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--xpbd-substeps N] [--verbose]
+//! cargo run --release --all-features --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--xpbd-substeps N] [--xpbd-match] [--verbose]
 //! ```
 //! writes `DIR/summary.csv`, `DIR/<scene>.csv` (time series) and `DIR/volume_error.png`, and
 //! prints the summary table.
+//!
+//! `--xpbd-match` also runs XPBD with 1, 2, 3, ... substeps (up to [`MATCH_MAX_SUBSTEPS`]) until
+//! its peak volume error is at or under the paper's method's: the cheapest XPBD with the same
+//! error (more substeps cost more). It writes `DIR/xpbd_match.csv` and prints one line per scene
+//! comparing the two step times, the comparison the XPBD peer is there for.
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
@@ -23,7 +28,16 @@ struct Args {
     verbose: bool,
     impulses: ImpulseSettings,
     xpbd_substeps: u32,
+    xpbd_match: bool,
 }
+
+/// The most XPBD substeps `--xpbd-match` tries before it gives up on matching the paper's
+/// method's error.
+const MATCH_MAX_SUBSTEPS: u32 = 20;
+
+/// Step times within this fraction of each other are called a tie by `--xpbd-match`: runs of
+/// the same build differ by 10 % and more on a busy machine.
+const MATCH_TIE: f64 = 0.05;
 
 fn parse_args() -> Result<Args, String> {
     let mut out = None;
@@ -31,6 +45,7 @@ fn parse_args() -> Result<Args, String> {
     let mut verbose = false;
     let mut impulses = ImpulseSettings::PAPER;
     let mut xpbd_substeps = 10;
+    let mut xpbd_match = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -43,6 +58,7 @@ fn parse_args() -> Result<Args, String> {
                 })?);
             }
             "--verbose" => verbose = true,
+            "--xpbd-match" => xpbd_match = true,
             "--xpbd-substeps" => {
                 let n = args.next().ok_or("--xpbd-substeps needs a number")?;
                 xpbd_substeps = n
@@ -71,7 +87,7 @@ fn parse_args() -> Result<Args, String> {
                 }
             }
             "-h" | "--help" => {
-                return Err("usage: paper_figures --out DIR [--scene NAME]... [--without one-ring,per-tet,clamp] [--xpbd-substeps N] [--verbose]".into());
+                return Err("usage: paper_figures --out DIR [--scene NAME]... [--without one-ring,per-tet,clamp] [--xpbd-substeps N] [--xpbd-match] [--verbose]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -85,6 +101,7 @@ fn parse_args() -> Result<Args, String> {
         verbose,
         impulses,
         xpbd_substeps,
+        xpbd_match,
     })
 }
 
@@ -242,10 +259,59 @@ fn main() {
     }
     std::fs::write(args.out.join("summary.csv"), &summary).expect("cannot write summary.csv");
     print!("{}", table(&summary));
+    if args.xpbd_match {
+        let mut matches = String::from(
+            "scene,paper_peak_pct,paper_step_ms,xpbd_substeps,xpbd_peak_pct,xpbd_step_ms,paper_over_xpbd,verdict\n",
+        );
+        for (scene, runs) in &all {
+            let paper = &runs[1];
+            writeln!(matches, "{}", xpbd_match(*scene, paper, args.verbose)).unwrap();
+        }
+        std::fs::write(args.out.join("xpbd_match.csv"), &matches)
+            .expect("cannot write xpbd_match.csv");
+        println!();
+        print!("{}", table(&matches));
+    }
     if let Err(e) = plot(&args.out.join("volume_error.png"), &all) {
         eprintln!("cannot draw volume_error.png: {e}");
         std::process::exit(1);
     }
+}
+
+/// The cheapest XPBD run of `scene` whose peak volume error is at or under `paper`'s, as a row
+/// of `xpbd_match.csv`.
+fn xpbd_match(scene: PaperScene, paper: &Run, verbose: bool) -> String {
+    for substeps in 1..=MATCH_MAX_SUBSTEPS {
+        let xpbd = run(
+            scene,
+            VolumeMethod::Xpbd(XpbdSettings { substeps }),
+            verbose,
+        );
+        if xpbd.peak <= paper.peak {
+            let ratio = paper.mean_step_ms / xpbd.mean_step_ms;
+            let verdict = if ratio < 1.0 - MATCH_TIE {
+                "paper faster"
+            } else if ratio > 1.0 + MATCH_TIE {
+                "xpbd faster"
+            } else {
+                "tie"
+            };
+            return format!(
+                "{},{:.4},{:.3},{substeps},{:.4},{:.3},{ratio:.2},{verdict}",
+                scene.name(),
+                paper.peak,
+                paper.mean_step_ms,
+                xpbd.peak,
+                xpbd.mean_step_ms
+            );
+        }
+    }
+    format!(
+        "{},{:.4},{:.3},>{MATCH_MAX_SUBSTEPS},,,,paper faster (no xpbd run matched its error)",
+        scene.name(),
+        paper.peak,
+        paper.mean_step_ms
+    )
 }
 
 /// The summary CSV as an aligned table.
