@@ -264,7 +264,8 @@ fn main() {
             "scene,paper_peak_pct,paper_step_ms,xpbd_substeps,xpbd_peak_pct,xpbd_step_ms,paper_over_xpbd,verdict\n",
         );
         for (scene, runs) in &all {
-            let paper = &runs[1];
+            let paper_name = VolumeMethod::Impulses(args.impulses).name();
+            let paper = runs.iter().find(|r| r.method == paper_name).unwrap();
             writeln!(matches, "{}", xpbd_match(*scene, paper, args.verbose)).unwrap();
         }
         std::fs::write(args.out.join("xpbd_match.csv"), &matches)
@@ -281,6 +282,14 @@ fn main() {
 /// The cheapest XPBD run of `scene` whose peak volume error is at or under `paper`'s, as a row
 /// of `xpbd_match.csv`.
 fn xpbd_match(scene: PaperScene, paper: &Run, verbose: bool) -> String {
+    if !paper.peak.is_finite() {
+        return format!(
+            "{},{},{:.3},,,,,no match (the paper's method's error is not finite)",
+            scene.name(),
+            paper.peak,
+            paper.mean_step_ms
+        );
+    }
     for substeps in 1..=MATCH_MAX_SUBSTEPS {
         let xpbd = run(
             scene,
