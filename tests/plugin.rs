@@ -153,6 +153,14 @@ fn bad_input_gives_errors_not_panics() {
         ..Default::default()
     };
     assert!(SoftBody::new(cube(1), bad).is_err());
+    let bad = SoftBodyMaterial {
+        method: VolumeMethod::Impulses(ImpulseSettings {
+            ring_tet_tolerance: f32::NAN,
+            ..Default::default()
+        }),
+        ..Default::default()
+    };
+    assert!(SoftBody::new(cube(1), bad).is_err());
     // Out-of-range pinned particles and a driven target that does not exist: logged, the game
     // goes on, and the valid indices still apply.
     let mut app = app(Vec3::new(0.0, -1.0, 0.0));

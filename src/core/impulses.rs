@@ -15,7 +15,8 @@
 //!   its target ([`monotone_root`]). The summed ring directions can point away from the ring's
 //!   target (its tets disagree), and then the cubic's positive roots lie past a turning point,
 //!   millions of times further than any sensible step: such a ring is left alone.
-//! - Tets and rings within `ImpulseSettings::tolerance` of their rest volume get no impulse.
+//! - Tets and rings within `ImpulseSettings::tolerance` of their rest volume get no impulse; a
+//!   ring within it whose tets are each within `ImpulseSettings::ring_tet_tolerance` neither.
 //! - Cubic without such a root: no impulse (counted in [`StepCounters`]); the next step
 //!   tries again from new positions. Forcing a step there could only overshoot.
 //! - All directions zero (ring at rest volume, or all its particles kinematic): skipped.
@@ -734,12 +735,7 @@ impl SoftBodyState {
             &mesh.blocks().vertices,
             &|view, worker, centres| {
                 for &p in centres {
-                    view.ring_impulse(
-                        worker,
-                        p as usize,
-                        settings.tolerance,
-                        settings.neighbour_clamp,
-                    );
+                    view.ring_impulse(worker, p as usize, &settings);
                 }
             },
         );
@@ -997,15 +993,12 @@ impl SoftBodyState {
         _mesh: &TetMesh,
         p: usize,
         h: f32,
-        tolerance: f32,
-        clamp: bool,
+        settings: &ImpulseSettings,
         spheres: &mut [RigidSphereState],
     ) -> ImpulseOutcome {
         let mut worker = PassWorker::for_mesh(&self.mesh);
         worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
-        let outcome = self
-            .single_view(h)
-            .ring_impulse(&mut worker, p, tolerance, clamp);
+        let outcome = self.single_view(h).ring_impulse(&mut worker, p, settings);
         self.finish_single(worker, spheres);
         outcome
     }
@@ -1156,9 +1149,9 @@ impl PassView<'_> {
         &self,
         worker: &mut PassWorker,
         p: usize,
-        tolerance: f32,
-        clamp: bool,
+        settings: &ImpulseSettings,
     ) -> ImpulseOutcome {
+        let (tolerance, clamp) = (settings.tolerance, settings.neighbour_clamp);
         let mesh = self.mesh;
         let ring = mesh.one_ring(p);
         let corners = mesh.ring_corners(p);
@@ -1171,7 +1164,9 @@ impl PassView<'_> {
         // The tets' volumes, errors, edges and gradients at the previews, four at a time.
         let groups = ring.len().div_ceil(LANES);
         let mut rest = 0.0f64;
-        let mut outside_tolerance = f32x4::ZERO;
+        let mut tet_outside_tolerance = f32x4::ZERO;
+        let mut ring_error = f32x4::ZERO;
+        let ring_tet_tolerance = f32x4::splat(settings.ring_tet_tolerance);
         for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
             let mut v0 = [0.0f32; LANES];
             let mut tet_corners = [[0u16; 4]; LANES];
@@ -1200,7 +1195,8 @@ impl PassView<'_> {
             let volume = edges[0].dot(gradients[0]);
             let v0 = f32x4::new(v0);
             let error = volume - v0;
-            outside_tolerance |= error.abs().cmp_gt(f32x4::splat(tolerance) * v0);
+            tet_outside_tolerance |= error.abs().cmp_gt(ring_tet_tolerance * v0);
+            ring_error += error;
             *lanes = RingLanes {
                 edges,
                 gradients,
@@ -1209,8 +1205,10 @@ impl PassView<'_> {
             };
         }
         // Most rings of a body near rest are within tolerance: they stop here, before any
-        // direction is written.
-        if !outside_tolerance.any() {
+        // direction is written (see `ImpulseSettings::ring_tet_tolerance`). A broken (NaN)
+        // volume is not within tolerance.
+        let ring_within = ring_error.reduce_add().abs() <= tolerance * rest as f32;
+        if ring_within && !tet_outside_tolerance.any() {
             return ImpulseOutcome::Skipped;
         }
         for (k, &i) in vertices.iter().enumerate() {
@@ -1710,6 +1708,7 @@ mod tests {
             gamma,
             neighbour_clamp,
             tolerance: 0.0,
+            ring_tet_tolerance: 0.0,
             ..ImpulseSettings::PAPER
         }
     }
@@ -1754,7 +1753,7 @@ mod tests {
         let mut applied = 0;
         for p in 0..body.positions.len() {
             let before = body.linear_momentum();
-            let outcome = body.ring_impulse(&body.mesh.clone(), p, H, 0.0, true, &mut []);
+            let outcome = body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, true), &mut []);
             let after = body.linear_momentum();
             if let ImpulseOutcome::Applied { .. } = outcome {
                 applied += 1;
@@ -1790,7 +1789,7 @@ mod tests {
                 .map(|&t| body.mesh.rest_volumes()[t as usize])
                 .sum();
             if let ImpulseOutcome::Applied { step, root, .. } =
-                body.ring_impulse(&body.mesh.clone(), p, H, 0.0, false, &mut [])
+                body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, false), &mut [])
             {
                 if step < root {
                     limited += 1;
@@ -1834,7 +1833,7 @@ mod tests {
         for p in 0..body.positions.len() {
             let before: Vec<f32> = (0..tets).map(|t| previewed_volume(&body, t)).collect();
             if let ImpulseOutcome::Applied { clamped: c, .. } =
-                body.ring_impulse(&body.mesh.clone(), p, H, 0.0, true, &mut [])
+                body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, true), &mut [])
             {
                 clamped += c as usize;
             }
@@ -2210,12 +2209,61 @@ mod tests {
         body.set_kinematic(0, body.positions[0]).unwrap();
         body.refresh_previews(H);
         for p in 0..body.positions.len() {
-            body.ring_impulse(&body.mesh.clone(), p, H, 0.0, true, &mut []);
+            body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, true), &mut []);
         }
         for t in 0..body.mesh.tet_count() {
             body.tet_impulse(&body.mesh.clone(), t, H, &exact(0.125, true), &mut []);
         }
         assert_eq!(body.velocities[0], v_before);
+    }
+
+    #[test]
+    fn a_ring_within_tolerance_is_corrected_only_for_a_tet_past_the_ring_tet_tolerance() {
+        // Moving an interior vertex alone changes its tets' volumes but not its ring's: the
+        // tets gain on one side what they lose on the other.
+        let ring_with_centre_moved = |by: f32| {
+            let mut body = shaken_body(0.0);
+            let centre = body.positions.iter().sum::<Vec3>() / body.positions.len() as f32;
+            let p = (0..body.positions.len())
+                .min_by(|&a, &b| {
+                    let (a, b) = (body.positions[a], body.positions[b]);
+                    a.distance(centre).total_cmp(&b.distance(centre))
+                })
+                .unwrap();
+            body.velocities[p] = Vec3::new(1.0, 0.6, 0.3).normalize() * (by / H);
+            body.refresh_previews(H);
+            let (mut ring, mut rest, mut worst) = (0.0, 0.0, 0.0f32);
+            for &t in body.mesh.one_ring(p) {
+                let v0 = body.mesh.rest_volumes()[t as usize];
+                let v = previewed_volume(&body, t as usize);
+                (ring, rest) = (ring + v, rest + v0);
+                worst = worst.max((v - v0).abs() / v0);
+            }
+            (body, p, (ring - rest).abs() / rest, worst)
+        };
+        let paper = ImpulseSettings::PAPER;
+        assert!(paper.tolerance < paper.ring_tet_tolerance);
+        let (mut body, p, ring_error, worst) = ring_with_centre_moved(0.0003);
+        assert!(ring_error < 0.1 * paper.tolerance, "{ring_error}");
+        assert!(
+            worst > paper.tolerance && worst < paper.ring_tet_tolerance,
+            "{worst}"
+        );
+        let outcome = body.ring_impulse(&body.mesh.clone(), p, H, &paper, &mut []);
+        assert!(matches!(outcome, ImpulseOutcome::Skipped), "{outcome:?}");
+        // The rule before the ring tet tolerance: any tet past the tolerance.
+        let before = ImpulseSettings {
+            ring_tet_tolerance: paper.tolerance,
+            ..paper
+        };
+        let outcome = body.ring_impulse(&body.mesh.clone(), p, H, &before, &mut []);
+        assert!(!matches!(outcome, ImpulseOutcome::Skipped), "{outcome:?}");
+
+        let (mut body, p, ring_error, worst) = ring_with_centre_moved(0.002);
+        assert!(ring_error < 0.1 * paper.tolerance, "{ring_error}");
+        assert!(worst > paper.ring_tet_tolerance, "{worst}");
+        let outcome = body.ring_impulse(&body.mesh.clone(), p, H, &paper, &mut []);
+        assert!(!matches!(outcome, ImpulseOutcome::Skipped), "{outcome:?}");
     }
 
     #[test]
