@@ -1156,60 +1156,63 @@ impl PassView<'_> {
         let ring = mesh.one_ring(p);
         let corners = mesh.ring_corners(p);
         let vertices = mesh.ring_vertices(p);
-        let rest_volumes = mesh.rest_volumes();
         let work = &mut worker.ring_work;
         for (k, &i) in vertices.iter().enumerate() {
             work.previews[k] = self.previews.get(i as usize);
         }
-        // The tets' volumes, errors, edges and gradients at the previews, four at a time.
         let groups = ring.len().div_ceil(LANES);
-        let mut rest = 0.0f64;
-        let mut tet_outside_tolerance = f32x4::ZERO;
-        let mut ring_error = f32x4::ZERO;
-        let ring_tet_tolerance = f32x4::splat(settings.ring_tet_tolerance);
-        for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
+        let ring_v0 = mesh.ring_rest_volumes(p);
+        let rest = mesh.ring_rest_volume(p);
+        // A group of four tets' edges `x_i - x_d` (i = a, b, c) at the previews and their rest
+        // volumes. Unused lanes hold a tet collapsed onto the centre: zero edges, volume and
+        // error. Every tet's last corner is the centre (see `TetMesh::ring_corners`).
+        let group_edges = |previews: &[Point4], group: usize| {
             let mut v0 = [0.0f32; LANES];
             let mut tet_corners = [[0u16; 4]; LANES];
             for l in 0..LANES {
                 let j = LANES * group + l;
                 if j < ring.len() {
-                    v0[l] = rest_volumes[ring[j] as usize];
-                    rest += v0[l] as f64;
+                    v0[l] = ring_v0[j];
                     tet_corners[l] = corners[j];
                 }
             }
-            // Unused lanes hold a tet collapsed onto the centre: zero edges, volume and error.
-            // Every tet's last corner is the centre (see `TetMesh::ring_corners`).
-            let x = |k: usize| {
-                Vec3x4::gather_points(&work.previews, tet_corners.map(|c| c[k] as usize))
-            };
-            let xd = Vec3x4::splat(work.previews[0].vec3());
-            let edges = [x(0) - xd, x(1) - xd, x(2) - xd];
-            let sixth = f32x4::splat(SIXTH);
+            let x = |k: usize| Vec3x4::gather_points(previews, tet_corners.map(|c| c[k] as usize));
+            let xd = Vec3x4::splat(previews[0].vec3());
+            ([x(0) - xd, x(1) - xd, x(2) - xd], f32x4::new(v0))
+        };
+        let sixth = f32x4::splat(SIXTH);
+        // First the tets' volume errors alone, four at a time: most rings of a body near rest
+        // are within tolerance and stop here, before anything is stored (see
+        // `ImpulseSettings::ring_tet_tolerance`). A broken (NaN) volume is not within
+        // tolerance. The volume comes from the gradient `ga = eb x ec / 6`, as below.
+        let mut tet_outside_tolerance = f32x4::ZERO;
+        let mut ring_error = f32x4::ZERO;
+        let ring_tet_tolerance = f32x4::splat(settings.ring_tet_tolerance);
+        for group in 0..groups {
+            let (edges, v0) = group_edges(&work.previews, group);
+            let error = edges[0].dot(edges[1].cross(edges[2]).scale(sixth)) - v0;
+            tet_outside_tolerance |= error.abs().cmp_gt(ring_tet_tolerance * v0);
+            ring_error += error;
+        }
+        let ring_within = ring_error.reduce_add().abs() <= tolerance * rest as f32;
+        if ring_within && !tet_outside_tolerance.any() {
+            return ImpulseOutcome::Skipped;
+        }
+        // The ring is corrected: the same again with the gradients, kept for what follows.
+        for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
+            let (edges, v0) = group_edges(&work.previews, group);
             let gradients = [
                 edges[1].cross(edges[2]).scale(sixth),
                 edges[2].cross(edges[0]).scale(sixth),
                 edges[0].cross(edges[1]).scale(sixth),
             ];
-            // The volume from the gradient already at hand: `ga = eb x ec / 6`.
             let volume = edges[0].dot(gradients[0]);
-            let v0 = f32x4::new(v0);
-            let error = volume - v0;
-            tet_outside_tolerance |= error.abs().cmp_gt(ring_tet_tolerance * v0);
-            ring_error += error;
             *lanes = RingLanes {
                 edges,
                 gradients,
                 volume,
-                error,
+                error: volume - v0,
             };
-        }
-        // Most rings of a body near rest are within tolerance: they stop here, before any
-        // direction is written (see `ImpulseSettings::ring_tet_tolerance`). A broken (NaN)
-        // volume is not within tolerance.
-        let ring_within = ring_error.reduce_add().abs() <= tolerance * rest as f32;
-        if ring_within && !tet_outside_tolerance.any() {
-            return ImpulseOutcome::Skipped;
         }
         for (k, &i) in vertices.iter().enumerate() {
             work.inv_masses[k] = self.inv_masses[i as usize];

@@ -149,6 +149,11 @@ pub struct TetMesh {
     /// vertices in that ring's `ring_vertices`: the ring impulse works on the ring's particles
     /// gathered in one small array, not on the whole body's.
     ring_corners: Vec<[u16; 4]>,
+    /// The rest volume of each tet of each one-ring, in the order of `one_rings`: read with
+    /// the ring's corners, without going through the tet's index.
+    ring_rest_volumes: Vec<f32>,
+    /// Each one-ring's rest volume, its tets' rest volumes summed in `f64` in ring order.
+    ring_rest_totals: Vec<f64>,
     tet_neighbours: Csr,
     blocks: Blocks,
     reoriented_tets: usize,
@@ -567,6 +572,19 @@ impl TetMesh {
             }
         }
 
+        let ring_rest_volumes: Vec<f32> = (0..n)
+            .flat_map(|p| one_rings.row(p))
+            .map(|&t| rest_volumes[t as usize])
+            .collect();
+        let ring_rest_totals = (0..n)
+            .map(|p| {
+                one_rings
+                    .row(p)
+                    .iter()
+                    .fold(0.0f64, |sum, &t| sum + rest_volumes[t as usize] as f64)
+            })
+            .collect();
+
         // Tets sharing at least one vertex with each tet.
         let mut stamp_t = vec![u32::MAX; tets.len()];
         let mut neighbour_pairs = Vec::new();
@@ -594,6 +612,8 @@ impl TetMesh {
             ring_vertices,
             ring_border_tets,
             ring_corners,
+            ring_rest_volumes,
+            ring_rest_totals,
             tet_neighbours,
             blocks,
             reoriented_tets,
@@ -644,6 +664,18 @@ impl TetMesh {
     #[inline]
     pub fn ring_corners(&self, p: usize) -> &[[u16; 4]] {
         &self.ring_corners[self.one_rings.range(p)]
+    }
+
+    /// The rest volumes of the tets of vertex `p`'s one-ring, in the order of
+    /// [`TetMesh::one_ring`].
+    pub fn ring_rest_volumes(&self, p: usize) -> &[f32] {
+        &self.ring_rest_volumes[self.one_rings.range(p)]
+    }
+
+    /// The rest volume of vertex `p`'s one-ring: its tets' rest volumes summed in `f64`, in
+    /// the order of [`TetMesh::one_ring`].
+    pub fn ring_rest_volume(&self, p: usize) -> f64 {
+        self.ring_rest_totals[p]
     }
 
     /// The largest number of vertices in any one-ring.
