@@ -8,7 +8,8 @@
 //! settling on the ground, and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is
 //! the wall-clock time of the plugin's stages per 10 ms step, all bodies together
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
-//! between the stages is not in it. `--threads N` sizes Bevy's task pools (`--threads-sleep` lets
+//! between the stages is not in it. A scene's three methods run side by side, in turns of 50
+//! steps, so that their ratios come from the same minutes of the machine. `--threads N` sizes Bevy's task pools (`--threads-sleep` lets
 //! them sleep between the stages: `SoftBodyThreads::keep_awake` off); `--only NAME` runs the
 //! scenes whose name contains NAME. Timings are for comparing runs on one machine; the criterion
 //! benches (`cargo bench`) time single steps with statistics.
@@ -92,19 +93,62 @@ fn app(threads: usize, keep_awake: bool) -> App {
 /// Runs `steps` steps of `app` and returns its tets and the mean wall-clock time of the
 /// plugin's stages per step (`SoftBodyStepTime`: all bodies together, in parallel when there are
 /// threads for it).
-fn run(app: &mut App, steps: u32) -> (usize, f64) {
+/// Steps taken by one method before the next method of the same scene takes its turn.
+const TURN: u32 = 50;
+
+/// Steps every app (one per method of a scene) `steps` times and returns each one's tets and
+/// mean step time. The apps take turns of [`TURN`] steps: a shared machine's slower or faster
+/// spells (here the same build's step times move by 30 % and more between minutes) then fall
+/// on all methods alike, so their ratios within a run mean something. Each turn is long enough
+/// (0.1 ms to 5 ms a step) for a body's data to be back in the caches after its first step.
+fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, f64)> {
     // The first update only starts the clock.
-    app.update();
-    for _ in 0..steps {
+    for app in apps.iter_mut() {
         app.update();
     }
-    let world = app.world_mut();
-    let tets = world
-        .query::<&SoftBody>()
-        .iter(world)
-        .map(|b| b.state().mesh().tet_count())
-        .sum();
-    (tets, world.resource::<SoftBodyStepTime>().mean_ms())
+    let mut done = 0;
+    while done < steps {
+        let turn = TURN.min(steps - done);
+        for app in apps.iter_mut() {
+            for _ in 0..turn {
+                app.update();
+            }
+        }
+        done += turn;
+    }
+    apps.iter_mut()
+        .map(|app| {
+            let world = app.world_mut();
+            let tets = world
+                .query::<&SoftBody>()
+                .iter(world)
+                .map(|b| b.state().mesh().tet_count())
+                .sum();
+            (tets, world.resource::<SoftBodyStepTime>().mean_ms())
+        })
+        .collect()
+}
+
+/// Runs `spawn` in a new app for each method, steps them in turns and prints their lines.
+fn bench(
+    args: &Args,
+    name: &str,
+    methods: &[VolumeMethod],
+    steps: u32,
+    spawn: impl Fn(&mut World, VolumeMethod),
+) {
+    let mut apps: Vec<App> = methods
+        .iter()
+        .map(|&method| {
+            let mut app = app(args.threads, args.keep_awake);
+            spawn(app.world_mut(), method);
+            app.world_mut().flush();
+            app
+        })
+        .collect();
+    for (method, (tets, ms)) in methods.iter().zip(run_in_turns(&mut apps, steps)) {
+        report(name, method.name(), args.threads, tets, ms);
+    }
 }
 
 fn report(scene: &str, method: &str, threads: usize, tets: usize, ms: f64) {
@@ -132,18 +176,10 @@ fn main() {
         if !wanted(scene.name()) {
             continue;
         }
-        for method in methods {
-            let mut app = app(args.threads, args.keep_awake);
-            {
-                let world = app.world_mut();
-                let mut commands = world.commands();
-                scene.spawn(&mut commands, method, Vec3::ZERO);
-                world.flush();
-            }
-            let steps = (scene.duration_secs() * 100.0).round() as u32;
-            let (tets, ms) = run(&mut app, steps);
-            report(scene.name(), method.name(), args.threads, tets, ms);
-        }
+        let steps = (scene.duration_secs() * 100.0).round() as u32;
+        bench(&args, scene.name(), &methods, steps, |world, method| {
+            scene.spawn(&mut world.commands(), method, Vec3::ZERO);
+        });
     }
 
     // Boxes from 1 000 to 200 000 tets settling on the ground under the creature scene's
@@ -159,31 +195,27 @@ fn main() {
         if !wanted(name) {
             continue;
         }
-        for method in methods {
-            let mut app = app(args.threads, args.keep_awake);
-            let mesh = box_grid(cells, Vec3::splat(0.1), Vec3::ZERO).expect("a valid grid");
+        let mesh: std::sync::Arc<_> = box_grid(cells, Vec3::splat(0.1), Vec3::ZERO)
+            .expect("a valid grid")
+            .into();
+        bench(&args, name, &methods, 100, |world, method| {
             let material = PaperScene::Creature.material(method);
-            let world = app.world_mut();
             world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
             world.spawn((
-                SoftBody::new(mesh.into(), material).expect("a valid material"),
+                SoftBody::new(mesh.clone(), material).expect("a valid material"),
                 Transform::from_xyz(0.0, 0.05, 0.0),
             ));
             world.spawn((StaticCollider::ground(0.8), Transform::default()));
-            let (tets, ms) = run(&mut app, 100);
-            report(name, method.name(), args.threads, tets, ms);
-        }
+        });
     }
 
     // Many bodies: 16 cubes of 6^3 cells side by side (bodies do not collide with each other).
     if wanted("bodies_16") {
-        for method in methods {
-            let mut app = app(args.threads, args.keep_awake);
-            let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(6), Vec3::splat(0.1), Vec3::ZERO)
-                .expect("a valid grid")
-                .into();
+        let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(6), Vec3::splat(0.1), Vec3::ZERO)
+            .expect("a valid grid")
+            .into();
+        bench(&args, "bodies_16", &methods, 300, |world, method| {
             let material = PaperScene::Creature.material(method);
-            let world = app.world_mut();
             world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
             for k in 0..16 {
                 let (i, j) = (k % 4, k / 4);
@@ -193,8 +225,6 @@ fn main() {
                 ));
             }
             world.spawn((StaticCollider::ground(0.8), Transform::default()));
-            let (tets, ms) = run(&mut app, 300);
-            report("bodies_16", method.name(), args.threads, tets, ms);
-        }
+        });
     }
 }
