@@ -9,10 +9,11 @@
 //! the wall-clock time of the plugin's stages per 10 ms step, all bodies together
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
 //! between the stages is not in it. A scene's three methods run side by side, in turns of 50
-//! steps, so that their ratios come from the same minutes of the machine. `--threads N` sizes Bevy's task pools (`--threads-sleep` lets
-//! them sleep between the stages: `SoftBodyThreads::keep_awake` off); `--only NAME` runs the
-//! scenes whose name contains NAME. Timings are for comparing runs on one machine; the criterion
-//! benches (`cargo bench`) time single steps with statistics.
+//! steps, so that their ratios come from the same minutes of the machine. `--threads N` sizes
+//! Bevy's task pools (`--threads-sleep` lets them sleep between the stages:
+//! `SoftBodyThreads::keep_awake` off); `--only NAME` runs the scenes whose name contains NAME.
+//! Timings are for comparing runs on one machine; the criterion benches (`cargo bench`) time
+//! single steps with statistics.
 
 use std::time::Duration;
 
@@ -90,14 +91,12 @@ fn app(threads: usize, keep_awake: bool) -> App {
     app
 }
 
-/// Runs `steps` steps of `app` and returns its tets and the mean wall-clock time of the
-/// plugin's stages per step (`SoftBodyStepTime`: all bodies together, in parallel when there are
-/// threads for it).
 /// Steps taken by one method before the next method of the same scene takes its turn.
 const TURN: u32 = 50;
 
 /// Steps every app (one per method of a scene) `steps` times and returns each one's tets and
-/// mean step time. The apps take turns of [`TURN`] steps: a shared machine's slower or faster
+/// the mean wall-clock time of its plugin's stages per step (`SoftBodyStepTime`: all bodies
+/// together, in parallel when there are threads for it). The apps take turns of [`TURN`] steps: a shared machine's slower or faster
 /// spells (here the same build's step times move by 30 % and more between minutes) then fall
 /// on all methods alike, so their ratios within a run mean something. Each turn is long enough
 /// (0.1 ms to 5 ms a step) for a body's data to be back in the caches after its first step.

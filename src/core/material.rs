@@ -72,7 +72,8 @@ pub struct ImpulseSettings {
     /// (section 4's clamp with `eps = V0 / 2`).
     pub neighbour_clamp: bool,
     /// Relative volume error `|V - V0| / V0` below which a tet needs no impulse; a ring is
-    /// left alone when all of its tets are within it. The paper corrects every tet and ring
+    /// left alone when its own volume is within it and none of its tets is off by more than
+    /// `ring_tet_tolerance`. The paper corrects every tet and ring
     /// every step, however small its error; most of them are within a hundredth of a percent
     /// once a body has settled, and their impulses would only cost time. Not a limit on the
     /// total error: a tet this close contributes at most this fraction of its volume to it.
