@@ -11,7 +11,9 @@
 //! `--xpbd-match` also runs XPBD with 1, 2, 3, ... substeps (up to [`MATCH_MAX_SUBSTEPS`]) until
 //! its peak volume error is at or under the paper's method's: the cheapest XPBD with the same
 //! error (more substeps cost more). It writes `DIR/xpbd_match.csv` and prints one line per scene
-//! comparing the two step times, the comparison the XPBD peer is there for.
+//! comparing the two step times, the comparison the XPBD peer is there for. Those times come
+//! from runs one after another; on a machine whose speed moves between minutes, time the
+//! substeps it finds side by side with `bench --only NAME --xpbd-substeps N`.
 
 use std::fmt::Write as _;
 use std::path::PathBuf;
