@@ -402,9 +402,10 @@ fn muster_crew(tet_counts: impl Iterator<Item = usize>) {
 /// `bench` example's 1k-tet box.
 pub const PARALLEL_PASS_MIN_TETS: usize = 2000;
 
-/// How the volume passes of each body use the threads: with fewer bodies than threads
-/// (`few_bodies`), each large body's blocks run in parallel too; with more, the bodies alone
-/// keep the threads busy. The result is the same either way (see `core::parallel`).
+/// How the stages of each body use the threads: with fewer bodies than threads
+/// (`few_bodies`), each large body's blocks (and chunks of particles) run in parallel too; with
+/// more, the bodies alone keep the threads busy. The result is the same either way (see
+/// `core::parallel`).
 fn pass_parallelism(few_bodies: bool, body: &SoftBodyState) -> &'static dyn Parallel {
     if few_bodies && body.mesh().tet_count() >= PARALLEL_PASS_MIN_TETS {
         &ComputePool
@@ -553,22 +554,27 @@ fn apply_forces(
 /// spheres, then particles against static colliders (last, so that no particle is left inside
 /// the ground by a sphere pushing it), then `after` on each body in the same task (one parallel
 /// section instead of two: waking a thread for each costs more than a small body's stage).
+/// A large body alone has its particles against the static colliders, and `after`, in
+/// chunks on the threads (the parallelism `after` gets); against the spheres they go one
+/// after another (each push moves the sphere the next particle meets).
 /// XPBD bodies resolve their contacts in their substeps.
 fn contact_pass(
     h: f32,
     solver: &mut SolverSpheres,
     bodies: &mut Bodies,
-    after: impl Fn(&mut SoftBodyState, &mut SoftBodyStats) + Send + Sync,
+    after: impl Fn(&mut SoftBodyState, &mut SoftBodyStats, &dyn Parallel) + Send + Sync,
 ) {
     for sphere in solver.states.iter_mut() {
         sphere.resolve_static_contacts(h, &solver.colliders);
     }
+    let few = few_bodies(bodies);
     par_with_spheres(bodies, solver, |s, stats, spheres, colliders| {
+        let parallel = pass_parallelism(few, s);
         if !s.material().method.is_xpbd() {
-            stats.contacts +=
-                s.resolve_sphere_contacts(h, spheres) + s.resolve_static_contacts(h, colliders);
+            stats.contacts += s.resolve_sphere_contacts(h, spheres)
+                + s.resolve_static_contacts_on(h, colliders, parallel);
         }
-        after(s, stats);
+        after(s, stats, parallel);
     });
 }
 
@@ -586,7 +592,7 @@ fn resolve_contacts(
     for (_, _, mut stats) in &mut bodies {
         stats.contacts = 0;
     }
-    contact_pass(h, &mut solver, &mut bodies, |_, _| {});
+    contact_pass(h, &mut solver, &mut bodies, |_, _, _| {});
     clock.current += start.elapsed();
 }
 
@@ -667,8 +673,8 @@ fn integrate(
     }
     let start = Instant::now();
     let solver_spheres = &mut *solver_spheres;
-    contact_pass(h, solver_spheres, &mut bodies, |s, stats| {
-        s.integrate_positions(h);
+    contact_pass(h, solver_spheres, &mut bodies, |s, stats, parallel| {
+        s.integrate_positions_on(h, parallel);
         stats.steps += 1;
     });
     for (entity, state) in solver_spheres

@@ -17,7 +17,8 @@ const CHILD: &str = "BEVY_SOFT_BODY_THREADS_CHILD";
 
 /// Steps four bodies (two methods), a sphere landing across two of them and the ground, or
 /// (`one_body`) one body of 8640 tets with a sphere landing on it, and returns every particle's
-/// and the sphere's final position, as bits.
+/// and the sphere's final position and the last step's contacts (in the order they came), as
+/// bits.
 fn simulate(threads: usize, keep_awake: bool, one_body: bool) -> Vec<u32> {
     // `threads` threads in the compute pool, where the systems and the bodies run.
     let mut options = TaskPoolOptions::with_num_threads(threads + 2);
@@ -87,6 +88,11 @@ fn simulate(threads: usize, keep_awake: bool, one_body: bool) -> Vec<u32> {
     for body in world.query::<&SoftBody>().iter(world) {
         for p in body.state().positions() {
             bits.extend(p.to_array().map(f32::to_bits));
+        }
+        // The particles in contact, in the order they came into contact.
+        for (i, normal) in body.state().contacts() {
+            bits.push(i as u32);
+            bits.extend(normal.to_array().map(f32::to_bits));
         }
     }
     for (_, t) in world.query::<(&RigidSphere, &Transform)>().iter(world) {

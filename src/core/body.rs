@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
-use super::contacts::RigidSphereState;
+use super::contacts::{CONTACT_CHUNK, ChunkFindings, RigidSphereState, findings_len};
 use super::geometry::{signed_volume, volume_gradients};
 use super::impulses::{ClampMotion, PassWorker};
 use super::lanes::Point4;
@@ -125,6 +125,8 @@ pub struct SoftBodyState {
     pub(crate) gravity: Vec3,
     /// Sphere positions saved during an XPBD substep (reused, so steps do not allocate).
     pub(crate) sphere_positions: Vec<Vec3>,
+    /// One per chunk of particles: what each job of the contacts and the integration found.
+    pub(crate) chunk_findings: Vec<ChunkFindings>,
 }
 
 impl SoftBodyState {
@@ -163,6 +165,7 @@ impl SoftBodyState {
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
             sphere_positions: Vec::new(),
+            chunk_findings: ChunkFindings::for_particles(n),
             mesh,
         };
         body.update_masses();
@@ -472,19 +475,36 @@ impl SoftBodyState {
     /// that one bad particle cannot turn the body, the spheres it touches and the game's
     /// transforms into NaN.
     pub fn integrate_positions(&mut self, h: f32) {
+        self.integrate_positions_on(h, &Serial);
+    }
+
+    /// [`SoftBodyState::integrate_positions`] with the particles in chunks run by `parallel`
+    /// (each particle on its own: the same result on any number of threads).
+    pub fn integrate_positions_on(&mut self, h: f32, parallel: &dyn Parallel) {
         if self.material.method.is_xpbd() {
             // `xpbd_pass` moved the particles through its substeps already.
             return;
         }
-        for (x, v) in self.positions.iter_mut().zip(&mut self.velocities) {
-            let next = *x + h * *v;
-            if next.is_finite() {
-                *x = next;
-            } else {
-                // The particle stays where it is (still finite) and stops.
-                *v = Vec3::ZERO;
-                self.counters.non_finite_velocities += 1;
+        let n = self.positions.len();
+        let positions = SharedSlice::new(&mut self.positions);
+        let velocities = SharedSlice::new(&mut self.velocities);
+        let findings = SharedSlice::new(&mut self.chunk_findings);
+        parallel.run(findings_len(n), &|chunk| {
+            // Safety: each job has its own chunk's findings and particles.
+            let found = unsafe { findings.get_mut(chunk) };
+            for i in CONTACT_CHUNK * chunk..(CONTACT_CHUNK * (chunk + 1)).min(n) {
+                let next = positions.get(i) + h * velocities.get(i);
+                if next.is_finite() {
+                    positions.set(i, next);
+                } else {
+                    // The particle stays where it is (still finite) and stops.
+                    velocities.set(i, Vec3::ZERO);
+                    found.non_finite += 1;
+                }
             }
+        });
+        for found in &mut self.chunk_findings {
+            self.counters.non_finite_velocities += std::mem::take(&mut found.non_finite);
         }
     }
 

@@ -22,6 +22,7 @@ use parry3d::query::contact;
 use parry3d::shape::{Ball, SharedShape};
 
 use super::body::SoftBodyState;
+use super::parallel::{Parallel, Serial, SharedSlice};
 
 /// A static collider as the contact stage sees it.
 #[derive(Clone)]
@@ -110,28 +111,97 @@ fn friction_change(vt: Vec3, limit: f32) -> Vec3 {
     }
 }
 
+/// Particles per job of [`SoftBodyState::resolve_static_contacts_on`] and
+/// [`SoftBodyState::integrate_positions_on`]: enough jobs in the soft cube's 2 197 particles
+/// (nine) for two threads to share them evenly.
+pub(crate) const CONTACT_CHUNK: usize = 256;
+
+/// What one job of [`SoftBodyState::resolve_static_contacts_on`] or
+/// [`SoftBodyState::integrate_positions_on`] found in its particles, added up in job order
+/// afterwards.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ChunkFindings {
+    /// Particles that touch something for the first time this step, in index order (room for
+    /// the whole chunk is kept, so steps do not allocate).
+    pub(crate) new_touching: Vec<u32>,
+    /// Contacts found.
+    pub(crate) contacts: u32,
+    /// Particles whose new position would not have been finite.
+    pub(crate) non_finite: u32,
+}
+
+impl ChunkFindings {
+    /// One per job for `particles` particles.
+    pub(crate) fn for_particles(particles: usize) -> Vec<ChunkFindings> {
+        (0..particles.div_ceil(CONTACT_CHUNK))
+            .map(|_| ChunkFindings {
+                new_touching: Vec::with_capacity(CONTACT_CHUNK.min(particles)),
+                ..Default::default()
+            })
+            .collect()
+    }
+}
+
 impl SoftBodyState {
     /// Pushes previewed positions out of static colliders. Returns the number of contacts.
     pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
-        let mut contacts = 0;
+        self.resolve_static_contacts_on(h, colliders, &Serial)
+    }
+
+    /// [`SoftBodyState::resolve_static_contacts`] with the particles in chunks run by
+    /// `parallel`: each particle's contacts depend on that particle alone, and the particles
+    /// newly in contact are listed in index order as one after another would, so the result
+    /// is the same on any number of threads.
+    pub fn resolve_static_contacts_on(
+        &mut self,
+        h: f32,
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) -> u32 {
+        if colliders.is_empty() {
+            return 0;
+        }
         let friction = self.material.friction;
-        for i in 0..self.positions.len() {
-            if self.inv_masses[i] == 0.0 {
-                continue;
-            }
-            for c in colliders {
-                let xp = self.positions[i] + h * self.velocities[i];
-                let Some((depth, n)) = c.penetration(xp) else {
+        let n = self.positions.len();
+        let (positions, inv_masses) = (&self.positions[..], &self.inv_masses[..]);
+        let velocities = SharedSlice::new(&mut self.velocities);
+        let normals = SharedSlice::new(&mut self.contact_normals);
+        let kept = SharedSlice::new(&mut self.contact_kept);
+        let sphere = SharedSlice::new(&mut self.contact_sphere);
+        let findings = SharedSlice::new(&mut self.chunk_findings);
+        parallel.run(findings_len(n), &|chunk| {
+            // Safety: each job has its own chunk's findings and particles.
+            let found = unsafe { findings.get_mut(chunk) };
+            for i in CONTACT_CHUNK * chunk..(CONTACT_CHUNK * (chunk + 1)).min(n) {
+                if inv_masses[i] == 0.0 {
                     continue;
-                };
-                let dvn = depth / h;
-                let mut v = self.velocities[i] + n * dvn;
-                let vt = v - n * v.dot(n);
-                v += friction_change(vt, combined_friction(friction, c.friction) * dvn);
-                self.velocities[i] = v;
-                self.record_contact(i, n, 0.0, None);
-                contacts += 1;
+                }
+                for c in colliders {
+                    let xp = positions[i] + h * velocities.get(i);
+                    let Some((depth, normal)) = c.penetration(xp) else {
+                        continue;
+                    };
+                    let dvn = depth / h;
+                    let mut v = velocities.get(i) + normal * dvn;
+                    let vt = v - normal * v.dot(normal);
+                    v += friction_change(vt, combined_friction(friction, c.friction) * dvn);
+                    velocities.set(i, v);
+                    // As `record_contact`, with the new ones listed by the job.
+                    if normals.get(i) == Vec3::ZERO {
+                        found.new_touching.push(i as u32);
+                    }
+                    normals.set(i, normal);
+                    kept.set(i, 0.0);
+                    sphere.set(i, u32::MAX);
+                    found.contacts += 1;
+                }
             }
+        });
+        let mut contacts = 0;
+        for found in &mut self.chunk_findings {
+            self.touching.extend_from_slice(&found.new_touching);
+            found.new_touching.clear();
+            contacts += std::mem::take(&mut found.contacts);
         }
         contacts
     }
@@ -187,6 +257,11 @@ impl SoftBodyState {
     }
 }
 
+/// Jobs of the per-particle chunks for `n` particles.
+pub(crate) fn findings_len(n: usize) -> usize {
+    n.div_ceil(CONTACT_CHUNK)
+}
+
 impl RigidSphereState {
     /// Gravity on the sphere (stage 1).
     pub fn apply_forces(&mut self, h: f32, gravity: Vec3) {
@@ -232,7 +307,62 @@ impl RigidSphereState {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use glam::Quat;
+    use crate::core::material::SoftBodyMaterial;
+    use crate::core::parallel::Threads;
+    use glam::{Quat, UVec3};
+
+    /// Particles in chunks on several threads meet the static colliders as on one thread:
+    /// the same velocities, contact normals, order in which particles came into contact, and
+    /// positions after integration, bit for bit.
+    #[test]
+    fn contacts_and_integration_in_chunks_do_not_depend_on_the_threads() {
+        let mesh = crate::core::box_grid(
+            UVec3::new(20, 2, 20),
+            Vec3::splat(0.1),
+            Vec3::new(-1.0, -0.05, -1.0),
+        )
+        .unwrap();
+        let n = mesh.vertex_count();
+        assert!(n > 4 * CONTACT_CHUNK, "several chunks: {n} particles");
+        let colliders = [
+            ColliderInstance::new(SharedShape::halfspace(Vec3::Y), Pose::IDENTITY, 0.5),
+            ColliderInstance::new(
+                SharedShape::new(Ball::new(0.4)),
+                Pose::from_parts(Vec3::new(0.3, 0.3, -0.2), Quat::IDENTITY),
+                0.8,
+            ),
+        ];
+        let mesh: std::sync::Arc<_> = mesh.into();
+        let run = |parallel: &dyn Parallel| {
+            let mut body = SoftBodyState::new(mesh.clone(), SoftBodyMaterial::default()).unwrap();
+            let mut contacts = Vec::new();
+            for step in 0..3 {
+                body.begin_step();
+                for (i, v) in body.velocities_mut().iter_mut().enumerate() {
+                    let k = (i * 7 + step * 3) % 11;
+                    *v = Vec3::new(k as f32 - 5.0, 3.0 - k as f32, 0.5 * k as f32 - 2.0);
+                }
+                contacts.push(body.resolve_static_contacts_on(0.01, &colliders, parallel));
+                // Listed in index order, as one particle after another finds them.
+                let listed: Vec<usize> = body.contacts().map(|(i, _)| i).collect();
+                assert!(listed.is_sorted(), "{listed:?}");
+                contacts.push(body.resolve_static_contacts_on(0.01, &colliders, parallel));
+                body.integrate_positions_on(0.01, parallel);
+            }
+            let touching: Vec<(usize, Vec3)> = body.contacts().collect();
+            (
+                body.positions().to_vec(),
+                body.velocities().to_vec(),
+                touching,
+                contacts,
+            )
+        };
+        let serial = run(&Serial);
+        assert!(serial.3.iter().all(|&c| c > 50), "contacts: {:?}", serial.3);
+        // The ball is met too, not only the ground.
+        assert!(serial.2.iter().any(|(_, normal)| normal.y < 0.99));
+        assert_eq!(run(&Threads), serial);
+    }
 
     /// The half-space shortcut answers what parry's point projection answers, for a ground
     /// turned and moved away from the origin.

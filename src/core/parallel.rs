@@ -214,26 +214,28 @@ pub(crate) fn run_phases(
     parallel.run(parallel.threads().clamp(1, total.max(1)), &run);
 }
 
+/// Runs each job on its own thread: for tests that results do not depend on the threads.
+#[cfg(test)]
+pub(crate) struct Threads;
+
+#[cfg(test)]
+impl Parallel for Threads {
+    fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync)) {
+        std::thread::scope(|scope| {
+            for i in 0..jobs {
+                scope.spawn(move || job(i));
+            }
+        });
+    }
+
+    fn threads(&self) -> usize {
+        4
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    /// Runs each job on its own thread.
-    struct Threads;
-
-    impl Parallel for Threads {
-        fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync)) {
-            std::thread::scope(|scope| {
-                for i in 0..jobs {
-                    scope.spawn(move || job(i));
-                }
-            });
-        }
-
-        fn threads(&self) -> usize {
-            4
-        }
-    }
 
     #[test]
     fn a_phase_starts_after_every_earlier_phase_even_past_an_empty_one() {
