@@ -127,6 +127,10 @@ pub struct SoftBodyState {
     pub(crate) sphere_positions: Vec<Vec3>,
     /// One per chunk of particles: what each job of the contacts and the integration found.
     pub(crate) chunk_findings: Vec<ChunkFindings>,
+    /// Per vertex, whether its ring was past its tolerance when its impulse last checked it:
+    /// a guess of whether it will be again, which decides only how the check is computed,
+    /// never its result (see `PassView::ring_impulse`).
+    pub(crate) ring_corrected: Vec<bool>,
 }
 
 impl SoftBodyState {
@@ -166,6 +170,7 @@ impl SoftBodyState {
             gravity: Vec3::ZERO,
             sphere_positions: Vec::new(),
             chunk_findings: ChunkFindings::for_particles(n),
+            ring_corrected: vec![false; n],
             mesh,
         };
         body.update_masses();
