@@ -18,7 +18,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
-use super::contacts::{CONTACT_CHUNK, ChunkFindings, RigidSphereState, findings_len};
+use super::contacts::{ChunkFindings, RigidSphereState, in_particle_chunks};
 use super::geometry::{signed_volume, volume_gradients};
 use super::impulses::{ClampMotion, PassWorker};
 use super::lanes::Point4;
@@ -493,11 +493,9 @@ impl SoftBodyState {
         let n = self.positions.len();
         let positions = SharedSlice::new(&mut self.positions);
         let velocities = SharedSlice::new(&mut self.velocities);
-        let findings = SharedSlice::new(&mut self.chunk_findings);
-        parallel.run(findings_len(n), &|chunk| {
-            // Safety: each job has its own chunk's findings and particles.
-            let found = unsafe { findings.get_mut(chunk) };
-            for i in CONTACT_CHUNK * chunk..(CONTACT_CHUNK * (chunk + 1)).min(n) {
+        // Each job writes its own chunk's particles.
+        in_particle_chunks(parallel, &mut self.chunk_findings, n, |found, particles| {
+            for i in particles {
                 let next = positions.get(i) + h * velocities.get(i);
                 if next.is_finite() {
                     positions.set(i, next);

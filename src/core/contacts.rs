@@ -142,6 +142,26 @@ impl ChunkFindings {
     }
 }
 
+/// Runs `job` on every chunk of [`CONTACT_CHUNK`] of `particles` particles, with that chunk's
+/// findings (one per chunk, from [`ChunkFindings::for_particles`]), on the threads of
+/// `parallel`.
+pub(crate) fn in_particle_chunks(
+    parallel: &dyn Parallel,
+    findings: &mut [ChunkFindings],
+    particles: usize,
+    job: impl Fn(&mut ChunkFindings, std::ops::Range<usize>) + Sync,
+) {
+    let findings = SharedSlice::new(findings);
+    parallel.run(particles.div_ceil(CONTACT_CHUNK), &|chunk| {
+        // Safety: each job has its own chunk's findings.
+        let found = unsafe { findings.get_mut(chunk) };
+        job(
+            found,
+            CONTACT_CHUNK * chunk..(CONTACT_CHUNK * (chunk + 1)).min(particles),
+        );
+    });
+}
+
 impl SoftBodyState {
     /// Pushes previewed positions out of static colliders. Returns the number of contacts.
     pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
@@ -168,11 +188,9 @@ impl SoftBodyState {
         let normals = SharedSlice::new(&mut self.contact_normals);
         let kept = SharedSlice::new(&mut self.contact_kept);
         let sphere = SharedSlice::new(&mut self.contact_sphere);
-        let findings = SharedSlice::new(&mut self.chunk_findings);
-        parallel.run(findings_len(n), &|chunk| {
-            // Safety: each job has its own chunk's findings and particles.
-            let found = unsafe { findings.get_mut(chunk) };
-            for i in CONTACT_CHUNK * chunk..(CONTACT_CHUNK * (chunk + 1)).min(n) {
+        // Each job writes its own chunk's particles.
+        in_particle_chunks(parallel, &mut self.chunk_findings, n, |found, particles| {
+            for i in particles {
                 if inv_masses[i] == 0.0 {
                     continue;
                 }
@@ -255,11 +273,6 @@ impl SoftBodyState {
         }
         contacts
     }
-}
-
-/// Jobs of the per-particle chunks for `n` particles.
-pub(crate) fn findings_len(n: usize) -> usize {
-    n.div_ceil(CONTACT_CHUNK)
 }
 
 impl RigidSphereState {
