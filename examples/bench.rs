@@ -1,6 +1,6 @@
 //! Step times of every scene and method, headless through the plugin:
 //!
-//! cargo run --release --all-features --example bench -- [--threads N] [--only NAME]
+//! cargo run --release --all-features --example bench -- [--threads N[,N...]] [--only NAME]
 //!
 //! prints one line per run, `scene=NAME method=NAME threads=N tets=N mean_step_ms=X`: the five
 //! paper scenes with the three methods (`baseline`, `paper`, `xpbd` with 10 substeps unless
@@ -11,7 +11,10 @@
 //! between the stages is not in it. A scene's three methods run side by side, in turns of 50
 //! steps, so that their ratios come from the same minutes of the machine. `--threads N` sizes
 //! Bevy's task pools (`--threads-sleep` lets them sleep between the stages:
-//! `SoftBodyThreads::keep_awake` off); `--only NAME` runs the scenes whose name contains NAME.
+//! `SoftBodyThreads::keep_awake` off); a list, `--threads 1,2`, runs every method once per
+//! count side by side in the same turns, in one pool of the largest count, each app held to its
+//! own count by `SoftBodyThreads::max_threads` (so a speed-up compares the same minutes too);
+//! `--only NAME` runs the scenes whose name contains NAME.
 //! Timings are for comparing runs on one machine; the criterion benches (`cargo bench`) time
 //! single steps with statistics.
 
@@ -25,7 +28,8 @@ use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
 
 struct Args {
-    threads: usize,
+    /// The thread counts to run side by side (`--threads 1,2`), each at most the pool's.
+    threads: Vec<usize>,
     only: Option<String>,
     xpbd_substeps: u32,
     /// `SoftBodyThreads::keep_awake` (off with `--threads-sleep`).
@@ -35,7 +39,7 @@ struct Args {
 fn parse_args() -> Result<Args, String> {
     let mut args = std::env::args().skip(1);
     let mut parsed = Args {
-        threads: 1,
+        threads: vec![1],
         only: None,
         xpbd_substeps: 10,
         keep_awake: true,
@@ -43,12 +47,17 @@ fn parse_args() -> Result<Args, String> {
     while let Some(a) = args.next() {
         match a.as_str() {
             "--threads" => {
-                let n = args.next().ok_or("--threads needs a number")?;
-                parsed.threads = n
-                    .parse()
-                    .ok()
-                    .filter(|&n| n >= 1)
-                    .ok_or(format!("--threads: `{n}` is not a thread count"))?;
+                let list = args.next().ok_or("--threads needs a number")?;
+                parsed.threads = list
+                    .split(',')
+                    .map(|n| {
+                        n.trim()
+                            .parse()
+                            .ok()
+                            .filter(|&n| n >= 1)
+                            .ok_or(format!("--threads: `{n}` is not a thread count"))
+                    })
+                    .collect::<Result<_, _>>()?;
             }
             "--only" => parsed.only = Some(args.next().ok_or("--only needs a name")?),
             "--xpbd-substeps" => {
@@ -62,7 +71,7 @@ fn parse_args() -> Result<Args, String> {
             "--threads-sleep" => parsed.keep_awake = false,
             "--bench" => {} // passed by `cargo bench`-style runners; nothing to do
             "-h" | "--help" => {
-                return Err("usage: bench [--threads N] [--threads-sleep] [--only NAME] [--xpbd-substeps N]".into());
+                return Err("usage: bench [--threads N[,N...]] [--threads-sleep] [--only NAME] [--xpbd-substeps N]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -70,12 +79,13 @@ fn parse_args() -> Result<Args, String> {
     Ok(parsed)
 }
 
-/// A headless app with `threads` threads in Bevy's compute task pool (where the systems and the
-/// bodies run; the IO and async pools get one each besides), stepping 10 ms per update.
-fn app(threads: usize, keep_awake: bool) -> App {
-    let mut options = TaskPoolOptions::with_num_threads(threads + 2);
-    options.compute.min_threads = threads;
-    options.compute.max_threads = threads;
+/// A headless app with `pool` threads in Bevy's compute task pool (where the systems and the
+/// bodies run; the IO and async pools get one each besides; the pools are one per process, so
+/// the first app sets them), stepping 10 ms per update, its steps held to `threads` of them.
+fn app(pool: usize, threads: usize, keep_awake: bool) -> App {
+    let mut options = TaskPoolOptions::with_num_threads(pool + 2);
+    options.compute.min_threads = pool;
+    options.compute.max_threads = pool;
     let mut app = App::new();
     app.add_plugins((
         MinimalPlugins.set(TaskPoolPlugin {
@@ -87,7 +97,10 @@ fn app(threads: usize, keep_awake: bool) -> App {
     .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
         Duration::from_millis(10),
     ))
-    .insert_resource(SoftBodyThreads { keep_awake });
+    .insert_resource(SoftBodyThreads {
+        keep_awake,
+        max_threads: threads,
+    });
     app
 }
 
@@ -128,7 +141,8 @@ fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, f64)> {
         .collect()
 }
 
-/// Runs `spawn` in a new app for each method, steps them in turns and prints their lines.
+/// Runs `spawn` in a new app for each thread count and method, steps them in turns and prints
+/// their lines.
 fn bench(
     args: &Args,
     name: &str,
@@ -136,17 +150,23 @@ fn bench(
     steps: u32,
     spawn: impl Fn(&mut World, VolumeMethod),
 ) {
-    let mut apps: Vec<App> = methods
+    let pool = args.threads.iter().copied().max().unwrap_or(1);
+    let runs: Vec<(usize, VolumeMethod)> = args
+        .threads
         .iter()
-        .map(|&method| {
-            let mut app = app(args.threads, args.keep_awake);
+        .flat_map(|&threads| methods.iter().map(move |&method| (threads, method)))
+        .collect();
+    let mut apps: Vec<App> = runs
+        .iter()
+        .map(|&(threads, method)| {
+            let mut app = app(pool, threads, args.keep_awake);
             spawn(app.world_mut(), method);
             app.world_mut().flush();
             app
         })
         .collect();
-    for (method, (tets, ms)) in methods.iter().zip(run_in_turns(&mut apps, steps)) {
-        report(name, method.name(), args.threads, tets, ms);
+    for (&(threads, method), (tets, ms)) in runs.iter().zip(run_in_turns(&mut apps, steps)) {
+        report(name, method.name(), threads, tets, ms);
     }
 }
 

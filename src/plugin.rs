@@ -162,6 +162,7 @@ fn prepare(
     if threads.keep_awake {
         // First, so that the crew is awake by the first parallel section.
         muster_crew(
+            &ComputePool::new(&threads),
             bodies
                 .iter()
                 .map(|(_, body, ..)| body.state.mesh().tet_count()),
@@ -327,23 +328,59 @@ fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> RigidSphereState
     }
 }
 
-/// Runs independent jobs (bodies, or the blocks of a volume pass, see `core::parallel`) on the
-/// threads of Bevy's compute task pool: the crew's when it is on duty (see [`crate::crew`]),
-/// else as tasks of the pool.
-struct ComputePool;
+/// Runs independent jobs (bodies, or the blocks of a volume pass, see `core::parallel`) on at
+/// most `threads` threads of Bevy's compute task pool (see [`SoftBodyThreads::max_threads`]):
+/// the crew's when it is on duty (see [`crate::crew`]), else as tasks of the pool.
+struct ComputePool {
+    /// The threads a step may use: the pool's, at most [`SoftBodyThreads::max_threads`], at
+    /// least one (the system's own).
+    threads: usize,
+}
+
+impl ComputePool {
+    fn new(settings: &SoftBodyThreads) -> ComputePool {
+        let pool = bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num());
+        ComputePool {
+            threads: pool.min(settings.max_threads).max(1),
+        }
+    }
+}
 
 impl Parallel for ComputePool {
     fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync)) {
-        if jobs > 1 && crew::BOARD.run(jobs, job) {
+        if jobs < 2 || self.threads < 2 {
+            return Serial.run(jobs, job);
+        }
+        if crew::BOARD.run(jobs, job) {
             return;
         }
         match bevy::tasks::ComputeTaskPool::try_get() {
-            Some(pool) if jobs > 1 && pool.thread_num() > 1 => {
-                pool.scope(|scope| {
-                    for i in 0..jobs {
-                        scope.spawn(async move { job(i) });
-                    }
-                });
+            Some(pool) if pool.thread_num() > 1 => {
+                if self.threads >= pool.thread_num() {
+                    pool.scope(|scope| {
+                        for i in 0..jobs {
+                            scope.spawn(async move { job(i) });
+                        }
+                    });
+                } else {
+                    // Fewer tasks than jobs, each taking the next job as it comes free, so that
+                    // no more than `threads` threads run them.
+                    let next = std::sync::atomic::AtomicUsize::new(0);
+                    let next = &next;
+                    pool.scope(|scope| {
+                        for _ in 0..self.threads.min(jobs) {
+                            scope.spawn(async move {
+                                loop {
+                                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                                    if i >= jobs {
+                                        break;
+                                    }
+                                    job(i);
+                                }
+                            });
+                        }
+                    });
+                }
             }
             _ => Serial.run(jobs, job),
         }
@@ -351,8 +388,8 @@ impl Parallel for ComputePool {
 
     fn threads(&self) -> usize {
         // The thread calling `scope` (a pool thread, when a system runs on one) works too;
-        // asking for more jobs than the pool has threads would only make them take turns.
-        bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num())
+        // asking for more jobs than there are threads would only make them take turns.
+        self.threads
     }
 }
 
@@ -366,22 +403,32 @@ pub struct SoftBodyThreads {
     /// wake up (see `crew.rs`). On by default; off, the threads sleep between the sections:
     /// less CPU time spent, a longer step when there are several threads.
     pub keep_awake: bool,
+    /// The most threads of the compute pool a step uses, the system's own included: a game
+    /// that wants cores left for its other systems sets it lower. `1` runs every stage on
+    /// the system's thread; `0` is taken as `1` (a step always has its thread). The default,
+    /// `usize::MAX`, uses the whole pool. A result does not depend on it (see
+    /// `core::parallel`). It also lets a benchmark time one and two threads side by side in one
+    /// process (the pool is one per process): `bench --threads 1,2`.
+    pub max_threads: usize,
 }
 
 impl Default for SoftBodyThreads {
     fn default() -> Self {
-        SoftBodyThreads { keep_awake: true }
+        SoftBodyThreads {
+            keep_awake: true,
+            max_threads: usize::MAX,
+        }
     }
 }
 
 /// Puts the crew on duty for this step if it has parallel work: two bodies or more, or one of
-/// at least [`PARALLEL_PASS_MIN_TETS`] tets; every thread of the compute pool but one (the
-/// step's own systems need one) becomes a member.
-fn muster_crew(tet_counts: impl Iterator<Item = usize>) {
+/// at least [`PARALLEL_PASS_MIN_TETS`] tets; every thread the step may use but one (the step's
+/// own systems need one) becomes a member.
+fn muster_crew(compute: &ComputePool, tet_counts: impl Iterator<Item = usize>) {
     let Some(pool) = bevy::tasks::ComputeTaskPool::try_get() else {
         return;
     };
-    if pool.thread_num() < 2 {
+    if compute.threads < 2 {
         return;
     }
     let (mut bodies, mut largest) = (0, 0);
@@ -392,7 +439,7 @@ fn muster_crew(tet_counts: impl Iterator<Item = usize>) {
     if bodies < 2 && largest < PARALLEL_PASS_MIN_TETS {
         return;
     }
-    for _ in 0..crew::BOARD.muster(pool.thread_num() - 1) {
+    for _ in 0..crew::BOARD.muster(compute.threads - 1) {
         pool.spawn(crew::BOARD.member()).detach();
     }
 }
@@ -406,9 +453,13 @@ pub const PARALLEL_PASS_MIN_TETS: usize = 2000;
 /// (`few_bodies`), each large body's blocks (and chunks of particles) run in parallel too; with
 /// more, the bodies alone keep the threads busy. The result is the same either way (see
 /// `core::parallel`).
-fn pass_parallelism(few_bodies: bool, body: &SoftBodyState) -> &'static dyn Parallel {
+fn pass_parallelism<'a>(
+    few_bodies: bool,
+    body: &SoftBodyState,
+    compute: &'a ComputePool,
+) -> &'a dyn Parallel {
     if few_bodies && body.mesh().tet_count() >= PARALLEL_PASS_MIN_TETS {
-        &ComputePool
+        compute
     } else {
         &Serial
     }
@@ -423,10 +474,9 @@ const ONE_BODY_PER_TASK: BatchingStrategy = BatchingStrategy::fixed(1);
 /// The bodies as the stages of a step see them.
 type Bodies<'w, 's> = Query<'w, 's, (Entity, &'static mut SoftBody, &'static mut SoftBodyStats)>;
 
-/// Whether there are fewer bodies than compute threads.
-fn few_bodies(bodies: &Bodies) -> bool {
-    let threads = bevy::tasks::ComputeTaskPool::try_get().map_or(1, |pool| pool.thread_num());
-    bodies.iter().count() < threads
+/// Whether there are fewer bodies than threads for the step.
+fn few_bodies(bodies: &Bodies, compute: &ComputePool) -> bool {
+    bodies.iter().count() < compute.threads
 }
 
 /// Runs `run` on every body: one body per job on the compute task pool's threads (the crew's,
@@ -435,6 +485,7 @@ fn few_bodies(bodies: &Bodies) -> bool {
 fn for_each_body(
     bodies: &mut Bodies,
     order: &mut Vec<Entity>,
+    compute: &ComputePool,
     run: impl Fn((Mut<SoftBody>, Mut<SoftBodyStats>)) + Send + Sync,
 ) {
     order.clear();
@@ -447,7 +498,7 @@ fn for_each_body(
     }
     let bodies = &*bodies;
     let order = &*order;
-    ComputePool.run(order.len(), &|i| {
+    compute.run(order.len(), &|i| {
         // SAFETY: each job reaches its own entity (`order` lists each body once), and this
         // function borrows the query mutably while the jobs run, so nothing else reaches it.
         if let Ok((_, body, stats)) = unsafe { bodies.get_unchecked(order[i]) } {
@@ -460,6 +511,7 @@ fn for_each_body(
 fn par_bodies(
     bodies: &mut Bodies,
     order: &mut Vec<Entity>,
+    compute: &ComputePool,
     stage: impl Fn(&mut SoftBodyState, &mut SoftBodyStats) + Send + Sync,
 ) {
     let run = |(mut body, mut stats): (Mut<SoftBody>, Mut<SoftBodyStats>)| {
@@ -468,7 +520,7 @@ fn par_bodies(
         stage(&mut body.state, &mut stats);
         body.step_time += start.elapsed();
     };
-    for_each_body(bodies, order, run);
+    for_each_body(bodies, order, compute, run);
 }
 
 /// Runs `pass` on every body in parallel, each against its own copy of the spheres as they were
@@ -480,6 +532,7 @@ fn par_bodies(
 fn par_with_spheres(
     bodies: &mut Bodies,
     solver: &mut SolverSpheres,
+    compute: &ComputePool,
     pass: impl Fn(&mut SoftBodyState, &mut SoftBodyStats, &mut [RigidSphereState], &[ColliderInstance])
     + Send
     + Sync,
@@ -495,7 +548,7 @@ fn par_with_spheres(
         pass(&mut body.state, &mut stats, &mut body.spheres, colliders);
         body.step_time += start.elapsed();
     };
-    for_each_body(bodies, &mut solver.bodies, run);
+    for_each_body(bodies, &mut solver.bodies, compute, run);
     if solver.states.is_empty() {
         return;
     }
@@ -510,6 +563,8 @@ fn par_with_spheres(
     }
 }
 
+// A system takes one parameter per resource and query it reads.
+#[allow(clippy::too_many_arguments)]
 fn apply_forces(
     time: Res<Time>,
     gravity: Res<SoftBodyGravity>,
@@ -518,6 +573,7 @@ fn apply_forces(
     mut bodies: Bodies,
     spheres: Query<(Entity, &RigidSphere, &Transform)>,
     collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
+    threads: Res<SoftBodyThreads>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -525,10 +581,11 @@ fn apply_forces(
     }
     let start = Instant::now();
     let g = gravity.0;
-    let few = few_bodies(&bodies);
+    let compute = ComputePool::new(&threads);
+    let few = few_bodies(&bodies, &compute);
     let solver_spheres = &mut *solver_spheres;
-    par_bodies(&mut bodies, &mut solver_spheres.bodies, |s, _| {
-        s.apply_forces_on(h, g, pass_parallelism(few, s))
+    par_bodies(&mut bodies, &mut solver_spheres.bodies, &compute, |s, _| {
+        s.apply_forces_on(h, g, pass_parallelism(few, s, &compute))
     });
     solver_spheres.entities.clear();
     solver_spheres.states.clear();
@@ -562,14 +619,15 @@ fn contact_pass(
     h: f32,
     solver: &mut SolverSpheres,
     bodies: &mut Bodies,
+    compute: &ComputePool,
     after: impl Fn(&mut SoftBodyState, &mut SoftBodyStats, &dyn Parallel) + Send + Sync,
 ) {
     for sphere in solver.states.iter_mut() {
         sphere.resolve_static_contacts(h, &solver.colliders);
     }
-    let few = few_bodies(bodies);
-    par_with_spheres(bodies, solver, |s, stats, spheres, colliders| {
-        let parallel = pass_parallelism(few, s);
+    let few = few_bodies(bodies, compute);
+    par_with_spheres(bodies, solver, compute, |s, stats, spheres, colliders| {
+        let parallel = pass_parallelism(few, s, compute);
         if !s.material().method.is_xpbd() {
             stats.contacts += s.resolve_sphere_contacts(h, spheres)
                 + s.resolve_static_contacts_on(h, colliders, parallel);
@@ -583,6 +641,7 @@ fn resolve_contacts(
     mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Bodies,
+    threads: Res<SoftBodyThreads>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -592,7 +651,13 @@ fn resolve_contacts(
     for (_, _, mut stats) in &mut bodies {
         stats.contacts = 0;
     }
-    contact_pass(h, &mut solver, &mut bodies, |_, _, _| {});
+    contact_pass(
+        h,
+        &mut solver,
+        &mut bodies,
+        &ComputePool::new(&threads),
+        |_, _, _| {},
+    );
     clock.current += start.elapsed();
 }
 
@@ -601,17 +666,24 @@ fn one_ring(
     mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Bodies,
+    threads: Res<SoftBodyThreads>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
     let start = Instant::now();
-    let few = few_bodies(&bodies);
-    par_with_spheres(&mut bodies, &mut solver, |s, stats, spheres, colliders| {
-        stats.contacts += s.xpbd_pass(h, spheres, colliders);
-        s.one_ring_pass_on(h, spheres, pass_parallelism(few, s));
-    });
+    let compute = ComputePool::new(&threads);
+    let few = few_bodies(&bodies, &compute);
+    par_with_spheres(
+        &mut bodies,
+        &mut solver,
+        &compute,
+        |s, stats, spheres, colliders| {
+            stats.contacts += s.xpbd_pass(h, spheres, colliders);
+            s.one_ring_pass_on(h, spheres, pass_parallelism(few, s, &compute));
+        },
+    );
     clock.current += start.elapsed();
 }
 
@@ -620,15 +692,17 @@ fn per_tet(
     mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Bodies,
+    threads: Res<SoftBodyThreads>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
         return;
     }
     let start = Instant::now();
-    let few = few_bodies(&bodies);
-    par_with_spheres(&mut bodies, &mut solver, |s, _, spheres, _| {
-        s.per_tet_pass_on(h, spheres, pass_parallelism(few, s));
+    let compute = ComputePool::new(&threads);
+    let few = few_bodies(&bodies, &compute);
+    par_with_spheres(&mut bodies, &mut solver, &compute, |s, _, spheres, _| {
+        s.per_tet_pass_on(h, spheres, pass_parallelism(few, s, &compute));
     });
     clock.current += start.elapsed();
 }
@@ -638,6 +712,7 @@ fn plasticity(
     mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Bodies,
+    threads: Res<SoftBodyThreads>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -651,7 +726,8 @@ fn plasticity(
         return;
     }
     let start = Instant::now();
-    par_bodies(&mut bodies, &mut solver.bodies, |s, _| {
+    let compute = ComputePool::new(&threads);
+    par_bodies(&mut bodies, &mut solver.bodies, &compute, |s, _| {
         s.apply_plasticity(h)
     });
     clock.current += start.elapsed();
@@ -663,6 +739,7 @@ fn integrate(
     mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Bodies,
     mut spheres: Query<(&mut RigidSphere, &mut Transform), Without<StaticCollider>>,
+    threads: Res<SoftBodyThreads>,
 ) {
     // The crew stays while the last section (below) runs: dismissed members finish the
     // posting they are in, and take no other.
@@ -673,10 +750,17 @@ fn integrate(
     }
     let start = Instant::now();
     let solver_spheres = &mut *solver_spheres;
-    contact_pass(h, solver_spheres, &mut bodies, |s, stats, parallel| {
-        s.integrate_positions_on(h, parallel);
-        stats.steps += 1;
-    });
+    let compute = ComputePool::new(&threads);
+    contact_pass(
+        h,
+        solver_spheres,
+        &mut bodies,
+        &compute,
+        |s, stats, parallel| {
+            s.integrate_positions_on(h, parallel);
+            stats.steps += 1;
+        },
+    );
     for (entity, state) in solver_spheres
         .entities
         .iter()
@@ -704,7 +788,10 @@ impl Drop for DismissCrew {
     }
 }
 
-fn writeback(mut bodies: Query<(&SoftBody, &mut SoftBodyStats, &mut Transform)>) {
+fn writeback(
+    mut bodies: Query<(&SoftBody, &mut SoftBodyStats, &mut Transform)>,
+    threads: Res<SoftBodyThreads>,
+) {
     let write =
         |(body, mut stats, mut transform): (&SoftBody, Mut<SoftBodyStats>, Mut<Transform>)| {
             if !body.placed {
@@ -724,13 +811,61 @@ fn writeback(mut bodies: Query<(&SoftBody, &mut SoftBodyStats, &mut Transform)>)
     // A single body on this thread, as in the stages (`for_each_body`): a parallel query hands
     // it to a pool thread, which may have to wake up and has little of the body in its caches
     // (the soft cube's writeback, two threads, four runs: 50-78 us a step, inline 39-42; one
-    // thread 33-39).
-    if bodies.iter().len() < 2 {
+    // thread 33-39). So do bodies kept to one thread.
+    if bodies.iter().len() < 2 || ComputePool::new(&threads).threads < 2 {
         bodies.iter_mut().for_each(write);
     } else {
         bodies
             .par_iter_mut()
             .batching_strategy(ONE_BODY_PER_TASK)
             .for_each(write);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashSet;
+    use std::sync::Mutex;
+    use std::thread::ThreadId;
+
+    /// The distinct threads that ran `jobs` jobs of a millisecond each through `compute`.
+    fn threads_used(compute: &ComputePool, jobs: usize) -> usize {
+        let seen = Mutex::new(HashSet::<ThreadId>::new());
+        compute.run(jobs, &|_| {
+            seen.lock().unwrap().insert(std::thread::current().id());
+            // Long enough for every free thread to come and take a job.
+            std::thread::sleep(Duration::from_millis(1));
+        });
+        seen.into_inner().unwrap().len()
+    }
+
+    #[test]
+    fn a_step_uses_no_more_threads_than_max_threads() {
+        // The only test of this binary that touches the pool, so it sets its size.
+        let pool = bevy::tasks::ComputeTaskPool::get_or_init(|| {
+            bevy::tasks::TaskPoolBuilder::new().num_threads(4).build()
+        });
+        assert_eq!(pool.thread_num(), 4);
+        let limited = |max_threads| {
+            ComputePool::new(&SoftBodyThreads {
+                max_threads,
+                ..Default::default()
+            })
+        };
+        assert_eq!(limited(0).threads, 1);
+        assert_eq!(limited(1).threads, 1);
+        assert_eq!(limited(usize::MAX).threads, 4);
+        // Without a limit the jobs spread over more than two threads (so the checks below can
+        // fail), with one they stay on this thread, with two on at most two.
+        assert!(threads_used(&limited(usize::MAX), 64) > 2);
+        assert_eq!(threads_used(&limited(1), 64), 1);
+        assert!(threads_used(&limited(2), 64) <= 2);
+        // The same through the crew: one member for two threads, beside this thread.
+        let two = limited(2);
+        muster_crew(&two, [PARALLEL_PASS_MIN_TETS].into_iter());
+        let used = threads_used(&two, 64);
+        crew::BOARD.dismiss();
+        assert!(used <= 2, "{used} threads");
     }
 }
