@@ -1,6 +1,7 @@
 //! [`SoftBodyPlugin`]: the systems that step every soft body, in ordered sets that mirror the
 //! stages of a step, so that a game can put its own systems between them.
 
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
 use bevy::ecs::batching::BatchingStrategy;
@@ -356,31 +357,23 @@ impl Parallel for ComputePool {
         }
         match bevy::tasks::ComputeTaskPool::try_get() {
             Some(pool) if pool.thread_num() > 1 => {
-                if self.threads >= pool.thread_num() {
-                    pool.scope(|scope| {
-                        for i in 0..jobs {
-                            scope.spawn(async move { job(i) });
-                        }
-                    });
-                } else {
-                    // Fewer tasks than jobs, each taking the next job as it comes free, so that
-                    // no more than `threads` threads run them.
-                    let next = std::sync::atomic::AtomicUsize::new(0);
-                    let next = &next;
-                    pool.scope(|scope| {
-                        for _ in 0..self.threads.min(jobs) {
-                            scope.spawn(async move {
-                                loop {
-                                    let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                                    if i >= jobs {
-                                        break;
-                                    }
-                                    job(i);
+                // One task per thread the step may use, each taking the next job as it comes
+                // free (the thread calling `scope` may run one of them itself).
+                let next = AtomicUsize::new(0);
+                let next = &next;
+                pool.scope(|scope| {
+                    for _ in 0..self.threads.min(jobs) {
+                        scope.spawn(async move {
+                            loop {
+                                let i = next.fetch_add(1, Ordering::Relaxed);
+                                if i >= jobs {
+                                    break;
                                 }
-                            });
-                        }
-                    });
-                }
+                                job(i);
+                            }
+                        });
+                    }
+                });
             }
             _ => Serial.run(jobs, job),
         }
