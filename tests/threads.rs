@@ -106,7 +106,7 @@ fn simulate(threads: usize, max_threads: usize, keep_awake: bool, one_body: bool
 }
 
 /// Runs `test` in a child process per thread count (1, 2, 4, 2 asleep between the stages, and
-/// 4 held to 1 and to 2, asleep) and checks that all agree.
+/// 4 held to 1, and to 2 while asleep) and checks that all agree.
 fn compare_thread_counts(test: &str, one_body: bool) {
     if let Ok(threads) = std::env::var(CHILD) {
         let (threads, keep_awake) = match threads.strip_suffix(" asleep") {
