@@ -14,7 +14,8 @@
 //! `SoftBodyThreads::keep_awake` off); a list, `--threads 1,2`, runs every method once per
 //! count side by side in the same turns, in one pool of the largest count, each app held to its
 //! own count by `SoftBodyThreads::max_threads` (so a speed-up compares the same minutes too);
-//! `--only NAME` runs the scenes whose name contains NAME.
+//! `--only NAME` runs the scenes whose name contains NAME, `--method NAME` only that method
+//! (`baseline`, `paper` or `xpbd`: for a profiler that should see one method's code alone).
 //! Timings are for comparing runs on one machine; the criterion benches (`cargo bench`) time
 //! single steps with statistics.
 
@@ -31,6 +32,8 @@ struct Args {
     /// The thread counts to run side by side (`--threads 1,2`), each at most the pool's.
     threads: Vec<usize>,
     only: Option<String>,
+    /// Run only this method (`--method paper`).
+    method: Option<String>,
     xpbd_substeps: u32,
     /// `SoftBodyThreads::keep_awake` (off with `--threads-sleep`).
     keep_awake: bool,
@@ -41,6 +44,7 @@ fn parse_args() -> Result<Args, String> {
     let mut parsed = Args {
         threads: vec![1],
         only: None,
+        method: None,
         xpbd_substeps: 10,
         keep_awake: true,
     };
@@ -60,6 +64,13 @@ fn parse_args() -> Result<Args, String> {
                     .collect::<Result<_, _>>()?;
             }
             "--only" => parsed.only = Some(args.next().ok_or("--only needs a name")?),
+            "--method" => {
+                let name = args.next().ok_or("--method needs a name")?;
+                if !["baseline", "paper", "xpbd"].contains(&name.as_str()) {
+                    return Err(format!("--method: `{name}` is not baseline, paper or xpbd"));
+                }
+                parsed.method = Some(name);
+            }
             "--xpbd-substeps" => {
                 let n = args.next().ok_or("--xpbd-substeps needs a number")?;
                 parsed.xpbd_substeps = n
@@ -71,7 +82,7 @@ fn parse_args() -> Result<Args, String> {
             "--threads-sleep" => parsed.keep_awake = false,
             "--bench" => {} // passed by `cargo bench`-style runners; nothing to do
             "-h" | "--help" => {
-                return Err("usage: bench [--threads N[,N...]] [--threads-sleep] [--only NAME] [--xpbd-substeps N]".into());
+                return Err("usage: bench [--threads N[,N...]] [--threads-sleep] [--only NAME] [--method NAME] [--xpbd-substeps N]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -183,13 +194,16 @@ fn main() {
         }
     };
     let wanted = |name: &str| args.only.as_deref().is_none_or(|o| name.contains(o));
-    let methods = [
+    let methods: Vec<VolumeMethod> = [
         VolumeMethod::PAPER_BASELINE,
         VolumeMethod::PAPER_IMPULSES,
         VolumeMethod::Xpbd(XpbdSettings {
             substeps: args.xpbd_substeps,
         }),
-    ];
+    ]
+    .into_iter()
+    .filter(|m| args.method.as_deref().is_none_or(|n| n == m.name()))
+    .collect();
 
     for scene in PaperScene::ALL {
         if !wanted(scene.name()) {
