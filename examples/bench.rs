@@ -15,7 +15,10 @@
 //! count side by side in the same turns, in one pool of the largest count, each app held to its
 //! own count by `SoftBodyThreads::max_threads` (so a speed-up compares the same minutes too);
 //! `--only NAME` runs the scenes whose name contains NAME, `--method NAME` only that method
-//! (`baseline`, `paper` or `xpbd`: for a profiler that should see one method's code alone).
+//! (`baseline`, `paper` or `xpbd`: for a profiler that should see one method's code alone);
+//! `--stages` adds a line per run with the mean time of each stage of the step
+//! (`SoftBodyStepTime::mean_stage_ms`): `scene=NAME method=NAME threads=N stages forces_ms=X
+//! contacts_ms=X one_ring_ms=X per_tet_ms=X plasticity_ms=X integrate_ms=X`.
 //! Timings are for comparing runs on one machine; the criterion benches (`cargo bench`) time
 //! single steps with statistics.
 
@@ -37,6 +40,8 @@ struct Args {
     xpbd_substeps: u32,
     /// `SoftBodyThreads::keep_awake` (off with `--threads-sleep`).
     keep_awake: bool,
+    /// Print each run's stage times too (`--stages`).
+    stages: bool,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -47,6 +52,7 @@ fn parse_args() -> Result<Args, String> {
         method: None,
         xpbd_substeps: 10,
         keep_awake: true,
+        stages: false,
     };
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -80,9 +86,10 @@ fn parse_args() -> Result<Args, String> {
                     .ok_or(format!("--xpbd-substeps: `{n}` is not 1 to 1000"))?;
             }
             "--threads-sleep" => parsed.keep_awake = false,
+            "--stages" => parsed.stages = true,
             "--bench" => {} // passed by `cargo bench`-style runners; nothing to do
             "-h" | "--help" => {
-                return Err("usage: bench [--threads N[,N...]] [--threads-sleep] [--only NAME] [--method NAME] [--xpbd-substeps N]".into());
+                return Err("usage: bench [--threads N[,N...]] [--threads-sleep] [--only NAME] [--method NAME] [--xpbd-substeps N] [--stages]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -119,12 +126,12 @@ fn app(pool: usize, threads: usize, keep_awake: bool) -> App {
 const TURN: u32 = 50;
 
 /// Steps every app (one per method of a scene) `steps` times and returns each one's tets and
-/// the mean wall-clock time of its plugin's stages per step (`SoftBodyStepTime`: all bodies
+/// its step times (`SoftBodyStepTime`, whose mean is the wall-clock time of its plugin's stages per step: all bodies
 /// together, in parallel when there are threads for it). The apps take turns of [`TURN`] steps: a shared machine's slower or faster
 /// spells (here the same build's step times move by 30 % and more between minutes) then fall
 /// on all methods alike, so their ratios within a run mean something. Each turn is long enough
 /// (0.1 ms to 5 ms a step) for a body's data to be back in the caches after its first step.
-fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, f64)> {
+fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, SoftBodyStepTime)> {
     // The first update only starts the clock.
     for app in apps.iter_mut() {
         app.update();
@@ -147,7 +154,7 @@ fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, f64)> {
                 .iter(world)
                 .map(|b| b.state().mesh().tet_count())
                 .sum();
-            (tets, world.resource::<SoftBodyStepTime>().mean_ms())
+            (tets, *world.resource::<SoftBodyStepTime>())
         })
         .collect()
 }
@@ -176,8 +183,21 @@ fn bench(
             app
         })
         .collect();
-    for (&(threads, method), (tets, ms)) in runs.iter().zip(run_in_turns(&mut apps, steps)) {
-        report(name, method.name(), threads, tets, ms);
+    for (&(threads, method), (tets, clock)) in runs.iter().zip(run_in_turns(&mut apps, steps)) {
+        report(name, method.name(), threads, tets, clock.mean_ms());
+        if args.stages {
+            let s = clock.mean_stage_ms();
+            println!(
+                "scene={name} method={} threads={threads} stages forces_ms={:.3} contacts_ms={:.3} one_ring_ms={:.3} per_tet_ms={:.3} plasticity_ms={:.3} integrate_ms={:.3}",
+                method.name(),
+                s.forces_ms,
+                s.contacts_ms,
+                s.one_ring_ms,
+                s.per_tet_ms,
+                s.plasticity_ms,
+                s.integrate_ms
+            );
+        }
     }
 }
 

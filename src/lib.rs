@@ -47,7 +47,10 @@ pub use loading::{
     ObjMeshLoader, SoftBodyAssetPlugin, SoftBodyAssetSet, SoftBodyFromAsset, SoftBodySource,
     TetGenLoader, TetMeshAsset,
 };
-pub use plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyStepTime, SoftBodyThreads, SoftBodyTiming};
+pub use plugin::{
+    SoftBodyPlugin, SoftBodySet, SoftBodyStageTimes, SoftBodyStepTime, SoftBodyThreads,
+    SoftBodyTiming,
+};
 #[cfg(feature = "render")]
 pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSet, surface_mesh};
 

@@ -95,6 +95,7 @@ impl Plugin for SoftBodyPlugin {
             .init_resource::<SoftBodyThreads>()
             .register_type::<SoftBodyThreads>()
             .register_type::<SoftBodyStepTime>()
+            .register_type::<SoftBodyStageTimes>()
             .add_message::<SoftBodyError>();
         if let Some(step) = self.time_step
             && self.schedule == FixedUpdate.intern()
@@ -298,9 +299,56 @@ pub struct SoftBodyStepTime {
     pub total_ms: f64,
     /// Steps so far.
     pub steps: u64,
+    /// All steps so far, stage by stage: where the time goes. The stages add up to
+    /// `total_ms` (see [`SoftBodyStepTime::mean_stage_ms`] for the means per step).
+    pub stages_total: SoftBodyStageTimes,
     /// The step being timed.
     #[reflect(ignore)]
     current: Duration,
+}
+
+/// Milliseconds spent in each timed stage of the step (see [`SoftBodySet`]), all bodies
+/// together. [`SoftBodySet::Prepare`] and [`SoftBodySet::Writeback`] are outside the step
+/// and not timed.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Reflect)]
+pub struct SoftBodyStageTimes {
+    /// [`SoftBodySet::Forces`].
+    pub forces_ms: f64,
+    /// [`SoftBodySet::Contacts`].
+    pub contacts_ms: f64,
+    /// [`SoftBodySet::OneRing`]: the one-ring pass, with its clamp bounds (for XPBD, its
+    /// whole substepped solve).
+    pub one_ring_ms: f64,
+    /// [`SoftBodySet::PerTet`].
+    pub per_tet_ms: f64,
+    /// [`SoftBodySet::Plasticity`].
+    pub plasticity_ms: f64,
+    /// [`SoftBodySet::Integrate`]: the last contact pass and the positions.
+    pub integrate_ms: f64,
+}
+
+impl SoftBodyStageTimes {
+    /// The sum of all stages.
+    pub fn sum_ms(&self) -> f64 {
+        self.forces_ms
+            + self.contacts_ms
+            + self.one_ring_ms
+            + self.per_tet_ms
+            + self.plasticity_ms
+            + self.integrate_ms
+    }
+
+    /// Each stage divided by `n`.
+    fn divided_by(&self, n: f64) -> SoftBodyStageTimes {
+        SoftBodyStageTimes {
+            forces_ms: self.forces_ms / n,
+            contacts_ms: self.contacts_ms / n,
+            one_ring_ms: self.one_ring_ms / n,
+            per_tet_ms: self.per_tet_ms / n,
+            plasticity_ms: self.plasticity_ms / n,
+            integrate_ms: self.integrate_ms / n,
+        }
+    }
 }
 
 impl SoftBodyStepTime {
@@ -311,6 +359,22 @@ impl SoftBodyStepTime {
         } else {
             self.total_ms / self.steps as f64
         }
+    }
+
+    /// Mean wall-clock time per step of each stage so far (zero before the first step).
+    pub fn mean_stage_ms(&self) -> SoftBodyStageTimes {
+        if self.steps == 0 {
+            SoftBodyStageTimes::default()
+        } else {
+            self.stages_total.divided_by(self.steps as f64)
+        }
+    }
+
+    /// Adds the time since `start` to the step being timed and to its stage.
+    fn add_stage(&mut self, start: Instant, stage: fn(&mut SoftBodyStageTimes) -> &mut f64) {
+        let elapsed = start.elapsed();
+        self.current += elapsed;
+        *stage(&mut self.stages_total) += elapsed.as_secs_f64() * 1e3;
     }
 }
 
@@ -597,7 +661,7 @@ fn apply_forces(
             collider.friction,
         ));
     }
-    clock.current += start.elapsed();
+    clock.add_stage(start, |s| &mut s.forces_ms);
 }
 
 /// One contact pass over everything: spheres against static colliders, then particles against
@@ -651,7 +715,7 @@ fn resolve_contacts(
         &ComputePool::new(&threads),
         |_, _, _| {},
     );
-    clock.current += start.elapsed();
+    clock.add_stage(start, |s| &mut s.contacts_ms);
 }
 
 fn one_ring(
@@ -677,7 +741,7 @@ fn one_ring(
             s.one_ring_pass_on(h, spheres, pass_parallelism(few, s, &compute));
         },
     );
-    clock.current += start.elapsed();
+    clock.add_stage(start, |s| &mut s.one_ring_ms);
 }
 
 fn per_tet(
@@ -697,7 +761,7 @@ fn per_tet(
     par_with_spheres(&mut bodies, &mut solver, &compute, |s, _, spheres, _| {
         s.per_tet_pass_on(h, spheres, pass_parallelism(few, s, &compute));
     });
-    clock.current += start.elapsed();
+    clock.add_stage(start, |s| &mut s.per_tet_ms);
 }
 
 fn plasticity(
@@ -723,7 +787,7 @@ fn plasticity(
     par_bodies(&mut bodies, &mut solver.bodies, &compute, |s, _| {
         s.apply_plasticity(h)
     });
-    clock.current += start.elapsed();
+    clock.add_stage(start, |s| &mut s.plasticity_ms);
 }
 
 fn integrate(
@@ -765,7 +829,7 @@ fn integrate(
             transform.translation = state.position;
         }
     }
-    clock.current += start.elapsed();
+    clock.add_stage(start, |s| &mut s.integrate_ms);
     clock.last_ms = clock.current.as_secs_f64() * 1e3;
     clock.total_ms += clock.last_ms;
     clock.steps += 1;

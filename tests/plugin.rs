@@ -7,6 +7,7 @@ use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::core::{TetMesh, TetMeshError, VolumeMethod, box_grid};
 use bevy_soft_body::prelude::*;
+use bevy_soft_body::{SoftBodyStageTimes, SoftBodyStepTime};
 use glam::UVec3;
 
 fn app(gravity: Vec3) -> App {
@@ -61,6 +62,43 @@ fn free_body_conserves_momentum_with_every_method() {
             method.name()
         );
     }
+}
+
+#[test]
+fn the_step_time_is_the_sum_of_its_stages() {
+    let mut app = app(Vec3::new(0.0, -9.81, 0.0));
+    app.world_mut()
+        .spawn(SoftBody::new(cube(4), material(VolumeMethod::PAPER_IMPULSES)).unwrap());
+    assert_eq!(
+        app.world().resource::<SoftBodyStepTime>().mean_stage_ms(),
+        SoftBodyStageTimes::default()
+    );
+    for _ in 0..20 {
+        app.update();
+    }
+    let clock = app.world().resource::<SoftBodyStepTime>();
+    assert_eq!(clock.steps, 20);
+    let stages = clock.stages_total;
+    assert!(
+        (stages.sum_ms() - clock.total_ms).abs() <= 1e-9 * clock.total_ms.max(1.0),
+        "stages {} ms, steps {} ms",
+        stages.sum_ms(),
+        clock.total_ms
+    );
+    // The stages that have work take time; the plasticity stage has none without plastic
+    // bodies and returns before it starts its clock.
+    for (name, ms) in [
+        ("forces", stages.forces_ms),
+        ("contacts", stages.contacts_ms),
+        ("one-ring", stages.one_ring_ms),
+        ("per-tet", stages.per_tet_ms),
+        ("integrate", stages.integrate_ms),
+    ] {
+        assert!(ms > 0.0, "{name}: {ms} ms");
+    }
+    assert_eq!(stages.plasticity_ms, 0.0);
+    let mean = clock.mean_stage_ms();
+    assert!((mean.one_ring_ms * 20.0 - stages.one_ring_ms).abs() < 1e-9);
 }
 
 #[test]
