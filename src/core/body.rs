@@ -68,6 +68,9 @@ pub struct StepCounters {
     /// Impulses whose neighbour clamp was known to be moot from the pass's bounds, so its walk
     /// over the neighbours was skipped.
     pub clamps_skipped: u32,
+    /// Rings whose tolerance check was answered by the pass's bounds (within, nothing to do)
+    /// without computing their tets' volumes.
+    pub ring_checks_skipped: u32,
     /// Particles whose new position would not have been finite: kept in place and stopped.
     pub non_finite_velocities: u32,
 }
