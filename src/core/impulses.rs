@@ -166,10 +166,10 @@ struct RingCheckBound {
 }
 
 /// A ring is known to be within its tolerances when the bounds of [`RingCheckBound`] keep it
-/// within this fraction of them: the rest covers the rounding of the check's own `f32`
-/// volumes (about a millionth of a tet's volume for a well-shaped tet, a thousand times less
-/// than this margin of the ring tet tolerance), so the shortcut never skips a ring that the
-/// check would correct.
+/// within this fraction of them: the rest covers the rounding of the `f32` volumes, the
+/// check's and the bounds' own (about a millionth of a tet's volume for a well-shaped tet,
+/// hundreds of times less than this margin of the ring tet tolerance, 5e-4 of the tet's
+/// volume), so the shortcut never skips a ring that the check would correct.
 const RING_CHECK_MARGIN: f32 = 0.95;
 
 /// A one-ring pass uses the rings' [`RingCheckBound`]s only when at least [`QUIET_SHARE`] of
@@ -204,9 +204,10 @@ impl RingCheckBound {
 /// (but a few strays, see [`CARRY_STRAYS`]) has drifted from where they were taken (moved along
 /// with the body, see `ClampBounds::follow_translation`) by more than this fraction of its
 /// vertex radius: a body at rest, or nearly, whose particles come back to about the same
-/// previews step after step, or one that moves as a whole (falling, thrown, carried). The bounds hold however far the particles have
-/// gone (drifts are measured from their start, as for the per-tet pass), but the further they
-/// start from it, the fewer impulses they clear at once, so a moving body takes them afresh.
+/// previews step after step, or one that moves as a whole (falling, thrown, carried). The
+/// bounds hold however far the particles have gone (drifts are measured from their start, as
+/// for the per-tet pass), but the further they start from it, the fewer impulses they clear at
+/// once, so a body that changes its shape takes them afresh.
 ///
 /// Taking the bounds was about a fifth of the step of a 1080-tet box resting on the ground. In
 /// that box, over 600 steps, 0.125 / 0.25 / 0.5 / 1 of the radius let 68 / 241 / 400 / 491 passes
@@ -1417,8 +1418,8 @@ impl PassView<'_> {
     /// Whether the ring of `p`, within its tolerances when last checked, is known to be within
     /// them still because its particles have not drifted far enough since the bounds' start to
     /// leave them (see [`RingCheckBound`]): then its check, and its impulse, are skipped.
-    /// Not inlined: inlined beside `ring_impulse`, it made the compiler call that impulse's
-    /// own helpers out of line (about 3 % more instructions in the creature).
+    /// Kept out of line: it runs only in a quiet body's passes (see [`QUIET_DRIFT`]), and the
+    /// pass's loop around `ring_impulse` stays as small as it was without it.
     #[inline(never)]
     fn ring_known_within(
         &self,
@@ -1998,7 +1999,6 @@ mod tests {
     use crate::core::material::SoftBodyMaterial;
 
     const H: f32 = 0.01;
-    const KICK: Vec3 = Vec3::new(0.05, 0.1, -0.07);
 
     /// Settings with every impulse applied, however small its tet's error.
     fn exact(gamma: f32, neighbour_clamp: bool) -> ImpulseSettings {
@@ -2488,6 +2488,7 @@ mod tests {
     /// known fails here (checked).
     #[test]
     fn rings_known_within_their_tolerances_change_nothing() {
+        const KICK: Vec3 = Vec3::new(0.05, 0.1, -0.07);
         for moving in [Vec3::ZERO, Vec3::new(1.5, -4.0, 0.5)] {
             let mut fast = shaken_body(0.0);
             for v in fast.velocities_mut() {
