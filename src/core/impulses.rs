@@ -37,7 +37,9 @@ use wide::{CmpGe, CmpGt, CmpLe, CmpNe, f32x4};
 
 use super::body::{SoftBodyState, StepCounters};
 use super::contacts::RigidSphereState;
-use super::geometry::{SIXTH, signed_volume, volume_polynomial, volume_polynomial_lanes};
+use super::geometry::{
+    SIXTH, signed_volume, volume_gradients, volume_polynomial, volume_polynomial_lanes,
+};
 use super::lanes::{LANES, Point4, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
@@ -174,7 +176,7 @@ const RING_CHECK_MARGIN: f32 = 0.95;
 
 /// A one-ring pass uses the rings' [`RingCheckBound`]s only when at least [`QUIET_SHARE`] of
 /// the body's particles have drifted less than this fraction of their vertex radius since the
-/// bounds' start (see `ClampBounds::quiet`). A tet's radius is about where it loses half its
+/// bounds' start (counted by `ClampBounds::near_start`). A tet's radius is about where it loses half its
 /// volume, so a ring's tolerance (0.3 %) allows a small fraction of it, less its error. In a
 /// body that is not this still, few rings are known and the bounds cost more than they save:
 /// the soft cube under its resting sphere, with the rings' bounds on every carried pass, took
@@ -233,11 +235,14 @@ pub const CARRY_STRAYS: usize = 200;
 impl ClampBounds {
     /// Whether the kept bounds still hold for a one-ring pass from `previews` (the tets'
     /// regions too if `need_tet_regions`): see [`CARRY_DRIFT`] and [`CARRY_STRAYS`]. A vertex
-    /// without a positive radius, or a broken preview, asks for new bounds.
-    fn still_hold(&self, need_tet_regions: bool, previews: &[Point4]) -> bool {
-        self.kept
-            && (self.kept_tet_regions || !need_tet_regions)
-            && (self.always_carry || self.near_start(previews))
+    /// without a positive radius, or a broken preview, asks for new bounds. Also how many
+    /// particles are quiet (see [`ClampBounds::near_start`]).
+    fn still_hold(&self, need_tet_regions: bool, previews: &[Point4]) -> (bool, usize) {
+        if !self.kept || (need_tet_regions && !self.kept_tet_regions) {
+            return (false, 0);
+        }
+        let (near, quiet) = self.near_start(previews);
+        (self.always_carry || near, quiet)
     }
 
     /// Moves the bounds' start by the particles' mean drift from it (`previews` against
@@ -264,41 +269,29 @@ impl ClampBounds {
         }
     }
 
-    /// Whether at least [`QUIET_SHARE`] of the particles are within [`QUIET_DRIFT`] of their
-    /// vertex radius of the bounds' start: a body still enough for most of its rings to be
-    /// known within their tolerances (see [`RingCheckBound`]).
-    fn quiet(&self, previews: &[Point4]) -> bool {
-        let still = previews
-            .iter()
-            .zip(&self.start)
-            .zip(&self.vertex_radius)
-            .filter(|((p, start), radius)| {
-                let limit = QUIET_DRIFT * **radius;
-                (p.vec3() - **start).length_squared() <= limit * limit
-            })
-            .count();
-        still as f32 >= QUIET_SHARE * previews.len() as f32
-    }
-
     /// Whether the particles are within [`CARRY_DRIFT`] of their vertex radius of the bounds'
-    /// start, all but at most one in [`CARRY_STRAYS`].
-    fn near_start(&self, previews: &[Point4]) -> bool {
+    /// start, all but at most one in [`CARRY_STRAYS`]; and, if they are, how many are within
+    /// [`QUIET_DRIFT`] of it (zero if not).
+    fn near_start(&self, previews: &[Point4]) -> (bool, usize) {
         let mut strays = previews.len() / CARRY_STRAYS;
+        let mut quiet = 0;
         for ((p, &start), &radius) in previews.iter().zip(&self.start).zip(&self.vertex_radius) {
             let limit = CARRY_DRIFT * radius;
             let drift_squared = (p.vec3() - start).length_squared();
             let usable = limit > 0.0 && !drift_squared.is_nan();
             if !usable {
-                return false;
+                return (false, 0);
             }
             if drift_squared > limit * limit {
                 if strays == 0 {
-                    return false;
+                    return (false, 0);
                 }
                 strays -= 1;
             }
+            let still = QUIET_DRIFT / CARRY_DRIFT * limit;
+            quiet += (drift_squared <= still * still) as usize;
         }
-        true
+        (true, quiet)
     }
 
     /// The arrays, for the jobs of a pass to fill and then read (see [`BoundsView`]).
@@ -433,20 +426,13 @@ impl BoundsView<'_> {
         let (all, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
         for t in tets {
             let x = all[t].map(|i| self.start.get(i as usize));
-            let e = [x[0] - x[3], x[1] - x[3], x[2] - x[3]];
-            let g = [
-                e[1].cross(e[2]) * SIXTH,
-                e[2].cross(e[0]) * SIXTH,
-                e[0].cross(e[1]) * SIXTH,
-            ];
-            let gd = -(g[0] + g[1] + g[2]);
             let shape = TetShape {
-                error: e[0].dot(g[0]) - rest_volumes[t],
-                grad: g[0].length() + g[1].length() + g[2].length() + gd.length(),
-                reach: e[0]
-                    .length_squared()
-                    .max(e[1].length_squared())
-                    .max(e[2].length_squared())
+                error: signed_volume(&x) - rest_volumes[t],
+                grad: volume_gradients(&x).iter().map(|g| g.length()).sum(),
+                reach: x[..3]
+                    .iter()
+                    .map(|&xi| (xi - x[3]).length_squared())
+                    .fold(0.0f32, f32::max)
                     .sqrt(),
             };
             self.tet_shape.set(t, shape);
@@ -1058,14 +1044,20 @@ impl SoftBodyState {
         // measures each particle's drift again. Taking them costs about as much as the
         // per-tet pass's impulses in the soft cube. A one-ring pass goes on from an earlier
         // step's while the body has hardly moved since (see `CARRY_DRIFT`).
+        // Whether the body is quiet (see `QUIET_DRIFT`), known only when a one-ring pass checks
+        // whether it can go on from earlier bounds.
+        let mut quiet_body = false;
         let carry = match clamp_regions {
             Some(ClampRegions::Tets) => self.clamp_bounds.taken_this_step,
             Some(ClampRegions::Rings) => {
                 if self.clamp_bounds.kept {
                     self.clamp_bounds.follow_translation(&self.previews);
                 }
-                self.clamp_bounds
-                    .still_hold(take_tet_regions, &self.previews)
+                let (carry, quiet) = self
+                    .clamp_bounds
+                    .still_hold(take_tet_regions, &self.previews);
+                quiet_body = quiet as f32 >= QUIET_SHARE * self.previews.len() as f32;
+                carry
             }
             None => false,
         };
@@ -1084,9 +1076,7 @@ impl SoftBodyState {
             // A one-ring pass going on from earlier bounds knows most rings of a body at rest
             // to be within their tolerances (see `RingCheckBound`); the first such pass
             // computes what it needs from the bounds' start, in the bounds' first two phases.
-            let ring_checks = carry
-                && clamp_regions == Some(ClampRegions::Rings)
-                && self.clamp_bounds.quiet(&self.previews);
+            let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
             let shapes = ring_checks && !self.clamp_bounds.ring_checks_ready;
             let mut bounds = self
                 .clamp_bounds
@@ -2543,20 +2533,23 @@ mod tests {
         let within = Point4::new(Vec3::X * (0.99 * CARRY_DRIFT));
         let past = Point4::new(Vec3::Y * (1.01 * CARRY_DRIFT));
         let mut previews = vec![within; n];
-        assert!(bounds.near_start(&previews));
+        assert!(bounds.near_start(&previews).0);
         for stray in previews.iter_mut().step_by(7).take(n / CARRY_STRAYS) {
             *stray = past;
         }
-        assert!(bounds.near_start(&previews), "3 strays of {n} are allowed");
+        assert!(
+            bounds.near_start(&previews).0,
+            "3 strays of {n} are allowed"
+        );
         *previews.last_mut().unwrap() = past;
-        assert!(!bounds.near_start(&previews), "a fourth is not");
+        assert!(!bounds.near_start(&previews).0, "a fourth is not");
         let mut broken = vec![within; n];
         broken[5] = Point4::new(Vec3::NAN);
-        assert!(!bounds.near_start(&broken), "a NaN preview");
+        assert!(!bounds.near_start(&broken).0, "a NaN preview");
         let mut flat = bounds.clone();
         flat.vertex_radius[9] = 0.0;
         assert!(
-            !flat.near_start(&vec![within; n]),
+            !flat.near_start(&vec![within; n]).0,
             "a vertex without a radius"
         );
     }
