@@ -18,7 +18,8 @@
 //! (`baseline`, `paper` or `xpbd`: for a profiler that should see one method's code alone);
 //! `--stages` adds a line per run with the mean time of each stage of the step
 //! (`SoftBodyStepTime::mean_stage_ms`): `scene=NAME method=NAME threads=N stages forces_ms=X
-//! contacts_ms=X one_ring_ms=X per_tet_ms=X plasticity_ms=X integrate_ms=X`.
+//! contacts_ms=X one_ring_ms=X per_tet_ms=X plasticity_ms=X integrate_ms=X`; `--tolerance X` and
+//! `--ring-tet-tolerance X` set the paper's method's `ImpulseSettings` of those names.
 //! Timings are for comparing runs on one machine; the criterion benches (`cargo bench`) time
 //! single steps with statistics.
 
@@ -27,7 +28,7 @@ use std::time::Duration;
 use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
 use bevy::prelude::*;
 use bevy_soft_body::SoftBodyStepTime;
-use bevy_soft_body::core::{VolumeMethod, XpbdSettings, box_grid};
+use bevy_soft_body::core::{ImpulseSettings, VolumeMethod, XpbdSettings, box_grid};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
 
@@ -42,6 +43,8 @@ struct Args {
     keep_awake: bool,
     /// Print each run's stage times too (`--stages`).
     stages: bool,
+    /// The paper's method's settings (`--tolerance X`, `--ring-tet-tolerance X`).
+    impulses: ImpulseSettings,
 }
 
 fn parse_args() -> Result<Args, String> {
@@ -53,6 +56,7 @@ fn parse_args() -> Result<Args, String> {
         xpbd_substeps: 10,
         keep_awake: true,
         stages: false,
+        impulses: ImpulseSettings::PAPER,
     };
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -87,14 +91,28 @@ fn parse_args() -> Result<Args, String> {
             }
             "--threads-sleep" => parsed.keep_awake = false,
             "--stages" => parsed.stages = true,
+            "--tolerance" => parsed.impulses.tolerance = fraction(&a, args.next())?,
+            "--ring-tet-tolerance" => {
+                parsed.impulses.ring_tet_tolerance = fraction(&a, args.next())?;
+            }
             "--bench" => {} // passed by `cargo bench`-style runners; nothing to do
             "-h" | "--help" => {
-                return Err("usage: bench [--threads N[,N...]] [--threads-sleep] [--only NAME] [--method NAME] [--xpbd-substeps N] [--stages]".into());
+                return Err("usage: bench [--threads N[,N...]] [--threads-sleep] [--only NAME] [--method NAME] [--xpbd-substeps N] [--tolerance X] [--ring-tet-tolerance X] [--stages]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
     }
     Ok(parsed)
+}
+
+/// A relative tolerance given after `flag` (`--tolerance 0.005`): a finite number, not negative.
+fn fraction(flag: &str, value: Option<String>) -> Result<f32, String> {
+    let value = value.ok_or(format!("{flag} needs a number"))?;
+    value
+        .parse::<f32>()
+        .ok()
+        .filter(|x| x.is_finite() && *x >= 0.0)
+        .ok_or(format!("{flag}: `{value}` is not a number of 0 or more"))
 }
 
 /// A headless app with `pool` threads in Bevy's compute task pool (where the systems and the
@@ -216,7 +234,7 @@ fn main() {
     let wanted = |name: &str| args.only.as_deref().is_none_or(|o| name.contains(o));
     let methods: Vec<VolumeMethod> = [
         VolumeMethod::PAPER_BASELINE,
-        VolumeMethod::PAPER_IMPULSES,
+        VolumeMethod::Impulses(args.impulses),
         VolumeMethod::Xpbd(XpbdSettings {
             substeps: args.xpbd_substeps,
         }),

@@ -3,10 +3,11 @@
 //! headless app, and writes the paper's Figure 2 and the numbers behind it.
 //!
 //! ```text
-//! cargo run --release --all-features --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--xpbd-substeps N] [--xpbd-match] [--verbose]
+//! cargo run --release --all-features --example paper_figures -- --out DIR [--scene NAME] [--without PARTS] [--tolerance X] [--ring-tet-tolerance X] [--xpbd-substeps N] [--xpbd-match] [--verbose]
 //! ```
 //! writes `DIR/summary.csv`, `DIR/<scene>.csv` (time series) and `DIR/volume_error.png`, and
-//! prints the summary table.
+//! prints the summary table. `--tolerance` and `--ring-tet-tolerance` set the paper's method's
+//! `ImpulseSettings` of those names (relative errors, `0.003` for 0.3 %), to see what they trade.
 //!
 //! `--xpbd-match` also runs XPBD with 1, 2, 3, ... substeps (up to [`MATCH_MAX_SUBSTEPS`]) until
 //! its peak volume error is at or under the paper's method's: the cheapest XPBD with the same
@@ -60,6 +61,8 @@ fn parse_args() -> Result<Args, String> {
                 })?);
             }
             "--verbose" => verbose = true,
+            "--tolerance" => impulses.tolerance = fraction(&a, args.next())?,
+            "--ring-tet-tolerance" => impulses.ring_tet_tolerance = fraction(&a, args.next())?,
             "--xpbd-match" => xpbd_match = true,
             "--xpbd-substeps" => {
                 let n = args.next().ok_or("--xpbd-substeps needs a number")?;
@@ -89,7 +92,7 @@ fn parse_args() -> Result<Args, String> {
                 }
             }
             "-h" | "--help" => {
-                return Err("usage: paper_figures --out DIR [--scene NAME]... [--without one-ring,per-tet,clamp] [--xpbd-substeps N] [--xpbd-match] [--verbose]".into());
+                return Err("usage: paper_figures --out DIR [--scene NAME]... [--without one-ring,per-tet,clamp] [--tolerance X] [--ring-tet-tolerance X] [--xpbd-substeps N] [--xpbd-match] [--verbose]".into());
             }
             other => return Err(format!("unknown argument `{other}` (try --help)")),
         }
@@ -105,6 +108,16 @@ fn parse_args() -> Result<Args, String> {
         xpbd_substeps,
         xpbd_match,
     })
+}
+
+/// A relative tolerance given after `flag` (`--tolerance 0.005`): a finite number, not negative.
+fn fraction(flag: &str, value: Option<String>) -> Result<f32, String> {
+    let value = value.ok_or(format!("{flag} needs a number"))?;
+    value
+        .parse::<f32>()
+        .ok()
+        .filter(|x| x.is_finite() && *x >= 0.0)
+        .ok_or(format!("{flag}: `{value}` is not a number of 0 or more"))
 }
 
 /// One run's time series and summary.

@@ -326,7 +326,7 @@ impl SoftBodyState {
         self.contact_sphere[i] = sphere.map_or(u32::MAX, |k| k as u32);
     }
 
-    /// The dampers of all springs, in index order (see [`damp_spring`]).
+    /// The dampers of all springs, in index order, which is the blocks' (see [`damp_spring`]).
     pub(crate) fn damp_springs(&mut self, h: f32, damping: f32) {
         let velocities = SharedSlice::new(&mut self.velocities);
         for &edge in self.mesh.edges() {

@@ -44,7 +44,7 @@ use super::lanes::{LANES, Point4, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
 use super::roots::{Cubic, clear_of_zero, first_crossing, monotone_root};
-use super::tet_mesh::{Csr, NO_TET, TetMesh};
+use super::tet_mesh::{Csr, TetMesh};
 
 /// What one impulse did.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -899,6 +899,10 @@ struct RingLanes {
     error: f32x4,
 }
 
+/// What a volume pass does with one task's row of items (vertices or tet bundles; see
+/// `SoftBodyState::run_blocks`), given the row's place in the flat list of items.
+type BlockImpulses<'a> = dyn Fn(&PassView, &mut PassWorker, &[u32], usize) + Sync + 'a;
+
 /// Which clamp regions a pass uses.
 #[derive(Clone, Copy, PartialEq, Eq)]
 enum ClampRegions {
@@ -961,7 +965,7 @@ impl SoftBodyState {
             parallel,
             regions,
             &mesh.blocks().vertices,
-            &|view, worker, centres| {
+            &|view, worker, centres, _| {
                 for &p in centres {
                     let known = view.bounds.ring_checks
                         && view.ring_known_within(worker, p as usize, &settings);
@@ -1003,16 +1007,20 @@ impl SoftBodyState {
             parallel,
             regions,
             &mesh.blocks().tet_bundles,
-            &|view, worker, bundles| {
-                for bundle in bundles.chunks(LANES) {
-                    view.tet_bundle(worker, bundle, &settings);
+            &|view, worker, bundles, first| {
+                let blocks = mesh.blocks();
+                for (k, bundle) in bundles.chunks(LANES).enumerate() {
+                    let at = first + LANES * k..first + LANES * k + bundle.len();
+                    let corners = &blocks.bundle_corners[at.clone()];
+                    let rest = &blocks.bundle_rest_volumes[at];
+                    view.tet_bundle(worker, bundle, corners, rest, &settings);
                 }
             },
         );
     }
 
     /// Runs `impulse` on each task's row of `items` (the mesh's [`Blocks`]' vertices or tet
-    /// bundles), which it works through in order, with the result of running the tasks
+    /// bundles; with the row's place in the flat list of items), which it works through in order, with the result of running the tasks
     /// one after another (see [`super::parallel`]): the threads of `parallel` take tasks in
     /// order as they come free, each waiting for the earlier tasks it shares particles with. A
     /// thread only ever waits for tasks a running thread has already taken, so any number of
@@ -1027,7 +1035,7 @@ impl SoftBodyState {
         parallel: &dyn Parallel,
         clamp_regions: Option<ClampRegions>,
         items: &Csr,
-        impulse: &(dyn Fn(&PassView, &mut PassWorker, &[u32]) + Sync),
+        impulse: &BlockImpulses<'_>,
     ) {
         for worker in &mut self.pass_workers {
             worker.counters = StepCounters::default();
@@ -1206,7 +1214,7 @@ impl SoftBodyState {
                         // Safety: each task is run by one thread only.
                         let worker = unsafe { workers.get_mut(task) };
                         worker.max_moved = start_drift;
-                        impulse(&view, worker, items.row(task));
+                        impulse(&view, worker, items.row(task), items.range(task).start);
                     }
                 }
             });
@@ -1279,9 +1287,10 @@ impl SoftBodyState {
     ) -> ImpulseOutcome {
         let mut worker = PassWorker::for_mesh(&self.mesh);
         worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
-        let [outcome, ..] = self
-            .single_view(h)
-            .tet_bundle(&mut worker, &[t as u32], settings);
+        let (corners, rest) = (self.mesh.tets()[t], self.mesh.rest_volumes()[t]);
+        let [outcome, ..] =
+            self.single_view(h)
+                .tet_bundle(&mut worker, &[t as u32], &[corners], &[rest], settings);
         self.finish_single(worker, spheres);
         outcome
     }
@@ -1622,7 +1631,8 @@ impl PassView<'_> {
     /// The per-tet impulses of a bundle of [`LANES`] tets that share no vertex (see
     /// [`Blocks::tet_bundles`]; [`NO_TET`] marks an empty lane), one after another: each tet's
     /// four particles move by `gamma * s * d_i`, `s` being the smallest positive root of
-    /// `V_t(s) = V0_t`. Needs `refresh_previews` first.
+    /// `V_t(s) = V0_t`. `corners` and `rest_volumes` are the bundle's tets' (see
+    /// [`Blocks::bundle_corners`]). Needs `refresh_previews` first.
     ///
     /// No impulse of the bundle moves a particle another of its tets reads, so the volumes,
     /// directions and cubics of all four are computed at once in SIMD lanes ([`Vec3x4`]) from
@@ -1630,10 +1640,14 @@ impl PassView<'_> {
     /// overlap) and the velocity changes go lane by lane, in order.
     ///
     /// [`Blocks::tet_bundles`]: super::tet_mesh::Blocks::tet_bundles
+    /// [`Blocks::bundle_corners`]: super::tet_mesh::Blocks::bundle_corners
+    /// [`NO_TET`]: super::tet_mesh::NO_TET
     fn tet_bundle(
         &self,
         worker: &mut PassWorker,
         bundle: &[u32],
+        corners: &[[u32; 4]],
+        rest_volumes: &[f32],
         settings: &ImpulseSettings,
     ) -> [ImpulseOutcome; LANES] {
         let mut outcomes = [ImpulseOutcome::Skipped; LANES];
@@ -1644,13 +1658,10 @@ impl PassView<'_> {
             settings.neighbour_clamp,
         );
         // An empty lane holds a tet collapsed onto particle 0 with no rest volume: no error.
-        let tets: [[u32; 4]; LANES] = std::array::from_fn(|l| match bundle.get(l) {
-            Some(&t) if t != NO_TET => mesh.tets()[t as usize],
-            _ => [0; 4],
-        });
-        let v0 = f32x4::new(std::array::from_fn(|l| match bundle.get(l) {
-            Some(&t) if t != NO_TET => mesh.rest_volumes()[t as usize],
-            _ => 0.0,
+        let tets: [[u32; 4]; LANES] =
+            std::array::from_fn(|l| corners.get(l).copied().unwrap_or([0; 4]));
+        let v0 = f32x4::new(std::array::from_fn(|l| {
+            rest_volumes.get(l).copied().unwrap_or(0.0)
         }));
         let corner = |k: usize| self.previews.gather(tets.map(|t| t[k] as usize));
         let xd = corner(3);

@@ -34,7 +34,7 @@ impl Csr {
 
     /// Where row `i` lies in the flat list of items.
     #[inline]
-    fn range(&self, i: usize) -> std::ops::Range<usize> {
+    pub(crate) fn range(&self, i: usize) -> std::ops::Range<usize> {
         self.offsets[i] as usize..self.offsets[i + 1] as usize
     }
 
@@ -62,6 +62,14 @@ impl Csr {
     /// All items, row after row.
     pub fn items(&self) -> &[u32] {
         &self.items
+    }
+
+    /// Makes each item its own place in the flat list (`0, 1, 2, ...` row after row), for
+    /// items renumbered in this order.
+    fn number_items(&mut self) {
+        for (k, item) in self.items.iter_mut().enumerate() {
+            *item = k as u32;
+        }
     }
 }
 
@@ -184,8 +192,15 @@ pub struct Blocks {
     /// in SIMD lanes, and since no impulse of a bundle moves a particle of another, that is
     /// exactly the four impulses one after another.
     pub tet_bundles: Csr,
+    /// The corners of each item of [`Blocks::tet_bundles`], in the same order (`[0; 4]` for
+    /// [`NO_TET`]), and their rest volumes (0 for [`NO_TET`]): the per-tet pass reads them
+    /// front to back instead of looking each tet up across the mesh's arrays.
+    pub bundle_corners: Vec<[u32; 4]>,
+    /// See [`Blocks::bundle_corners`].
+    pub bundle_rest_volumes: Vec<f32>,
     /// Springs (indices into [`TetMesh::edges`]) of each task, in the order of their bundles
-    /// of [`LANES`] that share no vertex (see [`bundle_disjoint`]), without the padding.
+    /// of [`LANES`] that share no vertex (see [`bundle_disjoint`]), without the padding. The
+    /// mesh numbers its edges in this order, so the rows hold `0, 1, 2, ...` one after another.
     pub edges: Csr,
     /// For each task, the earlier tasks it must wait for: its neighbouring blocks of earlier
     /// colours.
@@ -419,6 +434,8 @@ impl Blocks {
             vertices: Csr::from_pairs(count, &vertex_pairs),
             tets: block_tets,
             tet_bundles: Csr::from_pairs(count, &bundle_pairs),
+            bundle_corners: Vec::new(),
+            bundle_rest_volumes: Vec::new(),
             edges: Csr::from_pairs(count, &edge_pairs),
             waits_for: Csr::from_pairs(count, &wait_pairs),
             neighbours: Csr::from_pairs(count, &neighbour_pairs),
@@ -601,7 +618,24 @@ impl TetMesh {
             }
         }
         let tet_neighbours = Csr::from_pairs(tets.len(), &neighbour_pairs);
-        let blocks = Blocks::new(&positions, &tets, &edges, &ring_vertices);
+        let mut blocks = Blocks::new(&positions, &tets, &edges, &ring_vertices);
+        // The springs numbered in the blocks' order, so that the passes over them (forces,
+        // dampers, XPBD's edges) read every per-spring array front to back instead of jumping
+        // across it; the order the springs are taken in is the same.
+        let edges: Vec<[u32; 2]> = blocks
+            .edges
+            .items()
+            .iter()
+            .map(|&e| edges[e as usize])
+            .collect();
+        blocks.edges.number_items();
+        let bundled = |t: u32| (t != NO_TET).then_some(t as usize);
+        blocks.bundle_corners = (blocks.tet_bundles.items().iter())
+            .map(|&t| bundled(t).map_or([0; 4], |t| tets[t]))
+            .collect();
+        blocks.bundle_rest_volumes = (blocks.tet_bundles.items().iter())
+            .map(|&t| bundled(t).map_or(0.0, |t| rest_volumes[t]))
+            .collect();
 
         Ok(TetMesh {
             positions,
@@ -640,7 +674,8 @@ impl TetMesh {
         self.rest_volumes.iter().map(|&v| v as f64).sum()
     }
 
-    /// Unique edges `[i, j]` with `i < j`: the springs.
+    /// Unique edges `[i, j]` with `i < j`: the springs, numbered in the order of the mesh's
+    /// blocks ([`Blocks::edges`]: each block's springs one after another).
     pub fn edges(&self) -> &[[u32; 2]] {
         &self.edges
     }
@@ -871,6 +906,15 @@ mod tests {
                         "bundle {bundle:?} shares a vertex"
                     );
                 }
+                // The bundles' own copies of their corners and rest volumes are the tets'.
+                for (k, &t) in blocks.tet_bundles.range(task).zip(bundles) {
+                    let (corners, rest) = match t {
+                        NO_TET => ([0; 4], 0.0),
+                        t => (mesh.tets()[t as usize], mesh.rest_volumes()[t as usize]),
+                    };
+                    assert_eq!(blocks.bundle_corners[k], corners);
+                    assert_eq!(blocks.bundle_rest_volumes[k], rest);
+                }
                 let mut bundled: Vec<u32> =
                     bundles.iter().copied().filter(|&t| t != NO_TET).collect();
                 padding += bundles.len() - bundled.len();
@@ -954,9 +998,21 @@ mod tests {
             assert_eq!(blocks.vertices.total(), mesh.vertex_count());
             assert_eq!(blocks.tets.total(), mesh.tet_count());
             assert_eq!(blocks.edges.total(), mesh.edges().len());
-            let mut springs = blocks.edges.items().to_vec();
-            springs.sort_unstable();
+            // The springs are numbered in the blocks' order, and they are the tets' edges, each
+            // once.
+            let springs = blocks.edges.items();
             assert!(springs.iter().enumerate().all(|(k, &e)| k == e as usize));
+            let mut edges = mesh.edges().to_vec();
+            edges.sort_unstable();
+            let mut tet_edges: Vec<[u32; 2]> = (mesh.tets().iter())
+                .flat_map(|t| {
+                    [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)]
+                        .map(|(a, b)| [t[a].min(t[b]), t[a].max(t[b])])
+                })
+                .collect();
+            tet_edges.sort_unstable();
+            tet_edges.dedup();
+            assert_eq!(edges, tet_edges);
         }
         // And the check finds what is wrong: tasks one layer wide, none waiting.
         let mesh = &meshes[0];
