@@ -5,7 +5,7 @@
 //! prints one line per run, `scene=NAME method=NAME threads=N tets=N mean_step_ms=X`: the five
 //! paper scenes with the three methods (`baseline`, `paper`, `xpbd` with 10 substeps unless
 //! `--xpbd-substeps N`) over their whole duration, boxes of 1 000 to 200 000 tets
-//! settling on the ground, and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is
+//! settling on the ground (100 steps; the small ones again from the start, 18 and 2 times), and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is
 //! the wall-clock time of the plugin's stages per 10 ms step, all bodies together
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
 //! between the stages is not in it. A scene's three methods run side by side, in turns of 50
@@ -177,13 +177,26 @@ fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, SoftBodyStepTime)> 
         .collect()
 }
 
+/// Adds `more`'s steps and times to `clock`'s.
+fn add_clock(clock: &mut SoftBodyStepTime, more: &SoftBodyStepTime) {
+    clock.total_ms += more.total_ms;
+    clock.steps += more.steps;
+    let (s, m) = (&mut clock.stages_total, &more.stages_total);
+    s.forces_ms += m.forces_ms;
+    s.contacts_ms += m.contacts_ms;
+    s.one_ring_ms += m.one_ring_ms;
+    s.per_tet_ms += m.per_tet_ms;
+    s.plasticity_ms += m.plasticity_ms;
+    s.integrate_ms += m.integrate_ms;
+}
+
 /// Runs `spawn` in a new app for each thread count and method, steps them in turns and prints
-/// their lines.
+/// their lines; `repeats` times over, each time from a new app, the means taken over all.
 fn bench(
     args: &Args,
     name: &str,
     methods: &[VolumeMethod],
-    steps: u32,
+    (steps, repeats): (u32, u32),
     spawn: impl Fn(&mut World, VolumeMethod),
 ) {
     let pool = args.threads.iter().copied().max().unwrap_or(1);
@@ -192,16 +205,27 @@ fn bench(
         .iter()
         .flat_map(|&threads| methods.iter().map(move |&method| (threads, method)))
         .collect();
-    let mut apps: Vec<App> = runs
-        .iter()
-        .map(|&(threads, method)| {
-            let mut app = app(pool, threads, args.keep_awake);
-            spawn(app.world_mut(), method);
-            app.world_mut().flush();
-            app
-        })
-        .collect();
-    for (&(threads, method), (tets, clock)) in runs.iter().zip(run_in_turns(&mut apps, steps)) {
+    let mut results: Vec<(usize, SoftBodyStepTime)> = Vec::new();
+    for repeat in 0..repeats.max(1) {
+        let mut apps: Vec<App> = runs
+            .iter()
+            .map(|&(threads, method)| {
+                let mut app = app(pool, threads, args.keep_awake);
+                spawn(app.world_mut(), method);
+                app.world_mut().flush();
+                app
+            })
+            .collect();
+        let clocks = run_in_turns(&mut apps, steps);
+        if repeat == 0 {
+            results = clocks;
+        } else {
+            for ((_, clock), (_, more)) in results.iter_mut().zip(&clocks) {
+                add_clock(clock, more);
+            }
+        }
+    }
+    for (&(threads, method), (tets, clock)) in runs.iter().zip(results) {
         report(name, method.name(), threads, tets, clock.mean_ms());
         if args.stages {
             let s = clock.mean_stage_ms();
@@ -248,13 +272,22 @@ fn main() {
             continue;
         }
         let steps = (scene.duration_secs() * 100.0).round() as u32;
-        bench(&args, scene.name(), &methods, steps, |world, method| {
-            scene.spawn(&mut world.commands(), method, Vec3::ZERO);
-        });
+        bench(
+            &args,
+            scene.name(),
+            &methods,
+            (steps, 1),
+            |world, method| {
+                scene.spawn(&mut world.commands(), method, Vec3::ZERO);
+            },
+        );
     }
 
     // Boxes from 1 000 to 200 000 tets settling on the ground under the creature scene's
-    // material and gravity, 100 steps each: the cost per tet as a body grows.
+    // material and gravity, 100 steps each: the cost per tet as a body grows. The smaller ones
+    // run their 100 steps again from the start until they have stepped about 2 million tets
+    // (the 1k box 18 times, the 9k box twice): the 1k box's 100 steps took 6 ms, short
+    // enough for a busy machine's noise to move its time per tet by a third from run to run.
     let boxes = [
         ("box_1k", UVec3::splat(6)),
         ("box_9k", UVec3::splat(12)),
@@ -269,7 +302,8 @@ fn main() {
         let mesh: std::sync::Arc<_> = box_grid(cells, Vec3::splat(0.1), Vec3::ZERO)
             .expect("a valid grid")
             .into();
-        bench(&args, name, &methods, 100, |world, method| {
+        let repeats = (20_000 / (5 * cells.element_product())).clamp(1, 20);
+        bench(&args, name, &methods, (100, repeats), |world, method| {
             let material = PaperScene::Creature.material(method);
             world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
             world.spawn((
@@ -285,7 +319,7 @@ fn main() {
         let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(6), Vec3::splat(0.1), Vec3::ZERO)
             .expect("a valid grid")
             .into();
-        bench(&args, "bodies_16", &methods, 300, |world, method| {
+        bench(&args, "bodies_16", &methods, (300, 1), |world, method| {
             let material = PaperScene::Creature.material(method);
             world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
             for k in 0..16 {
