@@ -23,6 +23,10 @@
 //! Timings are for comparing runs on one machine; the criterion benches (`cargo bench`) time
 //! single steps with statistics.
 
+mod measure_args;
+
+use measure_args::{fraction, substeps};
+
 use std::time::Duration;
 
 use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
@@ -81,14 +85,7 @@ fn parse_args() -> Result<Args, String> {
                 }
                 parsed.method = Some(name);
             }
-            "--xpbd-substeps" => {
-                let n = args.next().ok_or("--xpbd-substeps needs a number")?;
-                parsed.xpbd_substeps = n
-                    .parse()
-                    .ok()
-                    .filter(|n| (1..=1000).contains(n))
-                    .ok_or(format!("--xpbd-substeps: `{n}` is not 1 to 1000"))?;
-            }
+            "--xpbd-substeps" => parsed.xpbd_substeps = substeps(&a, args.next())?,
             "--threads-sleep" => parsed.keep_awake = false,
             "--stages" => parsed.stages = true,
             "--tolerance" => parsed.impulses.tolerance = fraction(&a, args.next())?,
@@ -103,16 +100,6 @@ fn parse_args() -> Result<Args, String> {
         }
     }
     Ok(parsed)
-}
-
-/// A relative tolerance given after `flag` (`--tolerance 0.005`): a finite number, not negative.
-fn fraction(flag: &str, value: Option<String>) -> Result<f32, String> {
-    let value = value.ok_or(format!("{flag} needs a number"))?;
-    value
-        .parse::<f32>()
-        .ok()
-        .filter(|x| x.is_finite() && *x >= 0.0)
-        .ok_or(format!("{flag}: `{value}` is not a number of 0 or more"))
 }
 
 /// A headless app with `pool` threads in Bevy's compute task pool (where the systems and the

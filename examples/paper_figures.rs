@@ -16,6 +16,10 @@
 //! from runs one after another; on a machine whose speed moves between minutes, time the
 //! substeps it finds side by side with `bench --only NAME --xpbd-substeps N`.
 
+mod measure_args;
+
+use measure_args::{fraction, substeps};
+
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -64,14 +68,7 @@ fn parse_args() -> Result<Args, String> {
             "--tolerance" => impulses.tolerance = fraction(&a, args.next())?,
             "--ring-tet-tolerance" => impulses.ring_tet_tolerance = fraction(&a, args.next())?,
             "--xpbd-match" => xpbd_match = true,
-            "--xpbd-substeps" => {
-                let n = args.next().ok_or("--xpbd-substeps needs a number")?;
-                xpbd_substeps = n
-                    .parse()
-                    .ok()
-                    .filter(|n| (1..=1000).contains(n))
-                    .ok_or(format!("--xpbd-substeps: `{n}` is not 1 to 1000"))?;
-            }
+            "--xpbd-substeps" => xpbd_substeps = substeps(&a, args.next())?,
             "--without" => {
                 // Switch parts of the paper's method off, to see what each one does.
                 for part in args
@@ -108,16 +105,6 @@ fn parse_args() -> Result<Args, String> {
         xpbd_substeps,
         xpbd_match,
     })
-}
-
-/// A relative tolerance given after `flag` (`--tolerance 0.005`): a finite number, not negative.
-fn fraction(flag: &str, value: Option<String>) -> Result<f32, String> {
-    let value = value.ok_or(format!("{flag} needs a number"))?;
-    value
-        .parse::<f32>()
-        .ok()
-        .filter(|x| x.is_finite() && *x >= 0.0)
-        .ok_or(format!("{flag}: `{value}` is not a number of 0 or more"))
 }
 
 /// One run's time series and summary.
