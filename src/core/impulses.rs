@@ -1073,6 +1073,11 @@ impl SoftBodyState {
             }
             None => false,
         };
+        // A one-ring pass going on from earlier bounds knows most rings of a body at rest to be
+        // within their tolerances (see `RingCheckBound`); the first such pass computes what it
+        // needs from the bounds' start, in the bounds' first two phases.
+        let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
+        let shapes = ring_checks && !self.clamp_bounds.ring_checks_ready;
         let blocks = self.mesh.blocks();
         if clamp_regions.is_some() {
             self.clamp_bounds
@@ -1085,11 +1090,6 @@ impl SoftBodyState {
             let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
             let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
             let any_touching = !self.touching.is_empty();
-            // A one-ring pass going on from earlier bounds knows most rings of a body at rest
-            // to be within their tolerances (see `RingCheckBound`); the first such pass
-            // computes what it needs from the bounds' start, in the bounds' first two phases.
-            let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
-            let shapes = ring_checks && !self.clamp_bounds.ring_checks_ready;
             let mut bounds = self
                 .clamp_bounds
                 .view(clamp_regions.unwrap_or(ClampRegions::Rings));
@@ -1234,7 +1234,9 @@ impl SoftBodyState {
             (Some(ClampRegions::Rings), true) => {
                 bounds.taken_this_step = bounds.kept_tet_regions;
                 bounds.carried_passes = bounds.carried_passes.saturating_add(1);
-                bounds.ring_checks_ready = true;
+                // Only a pass that computed the rings' checks makes them ready: a carried pass
+                // in a body not quiet enough computes none, and the next quiet one must.
+                bounds.ring_checks_ready |= shapes;
             }
             // Taken by a per-tet pass, without the rings' regions.
             (Some(ClampRegions::Tets), false) => {
@@ -2558,6 +2560,42 @@ mod tests {
                 kicked_rings > 0,
                 "{moving}, {kick}: the kicks put no ring past its tolerance"
             );
+        }
+    }
+
+    /// The rings' checks belong to one set of clamp bounds: a pass that goes on from the bounds
+    /// in a body that is not quiet computes none and must not leave the next quiet pass to use
+    /// checks of earlier bounds, or none at all, as if they were these bounds'.
+    #[test]
+    fn ring_checks_are_ready_only_once_computed_for_their_bounds() {
+        let mut body = shaken_body(0.3);
+        body.clamp_bounds.always_carry = true;
+        let first = (body.positions.clone(), body.velocities.clone());
+        for step in 0..7 {
+            body.begin_step();
+            if step == 6 {
+                // Back where the bounds were taken: no particle has drifted, the body is quiet.
+                (body.positions, body.velocities) = first.clone();
+            }
+            let carried_before = body.clamp_bounds.carried_passes;
+            body.one_ring_pass(H, &mut []);
+            body.per_tet_pass(H, &mut []);
+            body.integrate_positions(H);
+            let carried = body.clamp_bounds.carried_passes > carried_before;
+            assert!(
+                step == 0 || carried,
+                "step {step}: the bounds were taken again"
+            );
+            let ready = body.clamp_bounds.ring_checks_ready;
+            if step < 6 {
+                assert_eq!(body.counters().ring_checks_skipped, 0, "step {step}");
+                assert!(
+                    !ready,
+                    "step {step}: the rings' checks ready, none computed"
+                );
+            } else {
+                assert!(ready, "the quiet pass did not compute the rings' checks");
+            }
         }
     }
 
