@@ -313,6 +313,7 @@ impl Blocks {
     fn new(
         positions: &[Vec3],
         tets: &[[u32; 4]],
+        rest_volumes: &[f32],
         edges: &[[u32; 2]],
         ring_vertices: &Csr,
     ) -> Blocks {
@@ -430,12 +431,19 @@ impl Blocks {
             .flat_map(|&(late, early)| [(late, early), (early, late)])
             .collect();
         neighbour_pairs.sort_unstable();
+        let bundled = |t: u32| (t != NO_TET).then_some(t as usize);
+        let bundle_corners = (bundle_pairs.iter())
+            .map(|&(_, t)| bundled(t).map_or([0; 4], |t| tets[t]))
+            .collect();
+        let bundle_rest_volumes = (bundle_pairs.iter())
+            .map(|&(_, t)| bundled(t).map_or(0.0, |t| rest_volumes[t]))
+            .collect();
         Blocks {
             vertices: Csr::from_pairs(count, &vertex_pairs),
             tets: block_tets,
             tet_bundles: Csr::from_pairs(count, &bundle_pairs),
-            bundle_corners: Vec::new(),
-            bundle_rest_volumes: Vec::new(),
+            bundle_corners,
+            bundle_rest_volumes,
             edges: Csr::from_pairs(count, &edge_pairs),
             waits_for: Csr::from_pairs(count, &wait_pairs),
             neighbours: Csr::from_pairs(count, &neighbour_pairs),
@@ -618,7 +626,7 @@ impl TetMesh {
             }
         }
         let tet_neighbours = Csr::from_pairs(tets.len(), &neighbour_pairs);
-        let mut blocks = Blocks::new(&positions, &tets, &edges, &ring_vertices);
+        let mut blocks = Blocks::new(&positions, &tets, &rest_volumes, &edges, &ring_vertices);
         // The springs numbered in the blocks' order, so that the passes over them (forces,
         // dampers, XPBD's edges) read every per-spring array front to back instead of jumping
         // across it; the order the springs are taken in is the same.
@@ -629,13 +637,6 @@ impl TetMesh {
             .map(|&e| edges[e as usize])
             .collect();
         blocks.edges.number_items();
-        let bundled = |t: u32| (t != NO_TET).then_some(t as usize);
-        blocks.bundle_corners = (blocks.tet_bundles.items().iter())
-            .map(|&t| bundled(t).map_or([0; 4], |t| tets[t]))
-            .collect();
-        blocks.bundle_rest_volumes = (blocks.tet_bundles.items().iter())
-            .map(|&t| bundled(t).map_or(0.0, |t| rest_volumes[t]))
-            .collect();
 
         Ok(TetMesh {
             positions,
