@@ -5,8 +5,9 @@
 //! prints one line per run, `scene=NAME method=NAME threads=N tets=N mean_step_ms=X`: the five
 //! paper scenes with the three methods (`baseline`, `paper`, `xpbd` with 10 substeps unless
 //! `--xpbd-substeps N`) over their whole duration, boxes of 1 000 to 200 000 tets
-//! settling on the ground (100 steps; the small ones again from the start, 18 and 2 times), and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is
-//! the wall-clock time of the plugin's stages per 10 ms step, all bodies together
+//! settling on the ground (100 steps; the small ones again from the start, 18 and 2 times),
+//! and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is the
+//! wall-clock time of the plugin's stages per 10 ms step, all bodies together
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
 //! between the stages is not in it. A scene's three methods run side by side, in turns of 50
 //! steps, so that their ratios come from the same minutes of the machine. `--threads N` sizes
@@ -168,13 +169,7 @@ fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, SoftBodyStepTime)> 
 fn add_clock(clock: &mut SoftBodyStepTime, more: &SoftBodyStepTime) {
     clock.total_ms += more.total_ms;
     clock.steps += more.steps;
-    let (s, m) = (&mut clock.stages_total, &more.stages_total);
-    s.forces_ms += m.forces_ms;
-    s.contacts_ms += m.contacts_ms;
-    s.one_ring_ms += m.one_ring_ms;
-    s.per_tet_ms += m.per_tet_ms;
-    s.plasticity_ms += m.plasticity_ms;
-    s.integrate_ms += m.integrate_ms;
+    clock.stages_total.add(&more.stages_total);
 }
 
 /// Runs `spawn` in a new app for each thread count and method, steps them in turns and prints

@@ -338,6 +338,16 @@ impl SoftBodyStageTimes {
             + self.integrate_ms
     }
 
+    /// Adds `other`'s time in each stage to this one's: the stages of runs taken together.
+    pub fn add(&mut self, other: &SoftBodyStageTimes) {
+        self.forces_ms += other.forces_ms;
+        self.contacts_ms += other.contacts_ms;
+        self.one_ring_ms += other.one_ring_ms;
+        self.per_tet_ms += other.per_tet_ms;
+        self.plasticity_ms += other.plasticity_ms;
+        self.integrate_ms += other.integrate_ms;
+    }
+
     /// Each stage divided by `n`.
     fn divided_by(&self, n: f64) -> SoftBodyStageTimes {
         SoftBodyStageTimes {
