@@ -534,7 +534,8 @@ impl SoftBodyState {
         }
     }
 
-    /// Volume error, mean per-tet error and inverted tets of the current positions.
+    /// Volume error, mean per-tet error and inverted tets of the current positions. The plugin
+    /// measures every body every frame (`SoftBodyStats`), outside the step.
     pub fn volume_metrics(&self) -> VolumeMetrics {
         let mut volume = 0.0f64;
         let mut abs_err = 0.0f64;
@@ -543,9 +544,7 @@ impl SoftBodyState {
             let v = signed_volume(&tet.map(|i| self.positions[i as usize]));
             volume += v as f64;
             abs_err += ((v - v0) / v0).abs() as f64;
-            if v < 0.0 {
-                inverted_tets += 1;
-            }
+            inverted_tets += (v < 0.0) as usize;
         }
         let rest_volume = self.mesh.total_rest_volume();
         VolumeMetrics {

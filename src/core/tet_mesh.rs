@@ -149,6 +149,9 @@ pub struct TetMesh {
     positions: Vec<Vec3>,
     tets: Vec<[u32; 4]>,
     rest_volumes: Vec<f32>,
+    /// The rest volumes summed in `f64`, in tet order: read every frame by
+    /// `SoftBodyState::volume_metrics`, so summed once.
+    total_rest_volume: f64,
     edges: Vec<[u32; 2]>,
     one_rings: Csr,
     ring_vertices: Csr,
@@ -641,6 +644,7 @@ impl TetMesh {
         Ok(TetMesh {
             positions,
             tets,
+            total_rest_volume: rest_volumes.iter().map(|&v| v as f64).sum(),
             rest_volumes,
             edges,
             one_rings,
@@ -672,7 +676,7 @@ impl TetMesh {
 
     /// Sum of the rest volumes.
     pub fn total_rest_volume(&self) -> f64 {
-        self.rest_volumes.iter().map(|&v| v as f64).sum()
+        self.total_rest_volume
     }
 
     /// Unique edges `[i, j]` with `i < j`: the springs, numbered in the order of the mesh's
