@@ -1025,10 +1025,11 @@ impl SoftBodyState {
 
     /// Runs `impulse` on each task's row of `items` (the mesh's [`Blocks`]' vertices or tet
     /// bundles; with the row's place in the flat list of items), which it works through in
-    /// order, with the result of running the tasks one after another (see [`super::parallel`]): the threads of `parallel` take tasks in
-    /// order as they come free, each waiting for the earlier tasks it shares particles with. A
-    /// thread only ever waits for tasks a running thread has already taken, so any number of
-    /// threads, one included, finishes. Then adds up the tasks' counters and sphere velocity
+    /// order, with the result of running the tasks one after another (see
+    /// [`super::parallel`]): the threads of `parallel` take tasks in order as they come free,
+    /// each waiting for the earlier tasks it shares particles with. A thread only ever waits
+    /// for tasks a running thread has already taken, so any number of threads, one included,
+    /// finishes. Then adds up the tasks' counters and sphere velocity
     /// changes in task order.
     ///
     /// [`Blocks`]: super::tet_mesh::Blocks
