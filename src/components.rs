@@ -6,7 +6,7 @@ use std::time::Duration;
 use bevy::prelude::*;
 use parry3d::shape::SharedShape;
 
-use crate::core::{MaterialError, SoftBodyMaterial, SoftBodyState, StepCounters, TetMesh};
+use crate::core::{MaterialError, Runaway, SoftBodyMaterial, SoftBodyState, StepCounters, TetMesh};
 
 /// A soft body. Spawn it with a [`Transform`] that places its tet mesh in the world (the mesh
 /// is given in its own local frame); on its first step the plugin moves the particles there.
@@ -191,6 +191,10 @@ pub struct SoftBodyStats {
     /// What the volume passes did in the last step.
     #[reflect(ignore)]
     pub counters: StepCounters,
+    /// Times the body ran away and was put back (see [`SoftBodyErrorKind::Runaway`]).
+    pub runaway_resets: u32,
+    /// The step of the last runaway, if any.
+    pub last_runaway_step: Option<u64>,
 }
 
 impl SoftBodyStats {
@@ -239,6 +243,11 @@ pub enum SoftBodyErrorKind {
         /// Why.
         reason: String,
     },
+    /// The body ran away (a particle past `RunawayLimits::max_speed`, or the body stretched
+    /// past `max_stretch` times its rest size: an unstable material or mesh for the step) and
+    /// was put back in its rest shape, at rest, where it last was sane. Reported once per
+    /// spell of runaways; `SoftBodyStats::runaway_resets` counts them all.
+    Runaway(Runaway),
     /// A render surface (feature `render`) could not be bound to the body; it is not deformed.
     Surface {
         /// The entity of the surface.
@@ -270,6 +279,13 @@ impl std::fmt::Display for SoftBodyError {
                 f,
                 "soft body {}: cannot be built from its asset: {reason}",
                 self.body
+            ),
+            SoftBodyErrorKind::Runaway(r) => write!(
+                f,
+                "soft body {}: ran away (fastest particle {:.3e} m/s, extent {:.3e} m against \
+                 {:.3} m at rest) and was put back at rest at {}; its material is too stiff \
+                 for its step or its mesh too poor",
+                self.body, r.speed, r.extent, r.rest_extent, r.reset_to
             ),
             SoftBodyErrorKind::Surface { surface, reason } => write!(
                 f,

@@ -9,7 +9,7 @@ use bevy_egui::{EguiContexts, EguiPlugin, EguiPrimaryContextPass, egui};
 use egui_plot::{Legend, Line, Plot};
 
 use crate::components::{SoftBody, SoftBodyStats};
-use crate::core::{ImpulseSettings, Plasticity, VolumeMethod};
+use crate::core::{Elasticity, ImpulseSettings, Plasticity, VolumeMethod};
 
 /// Shows the inspector panel. Adds `EguiPlugin` if the app has none yet.
 pub struct SoftBodyInspectorPlugin;
@@ -185,16 +185,35 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
             );
         }
     }
-    ui.add(
-        egui::Slider::new(&mut m.distance_stiffness, 0.0..=50.0)
-            .logarithmic(true)
-            .text("k_D"),
-    );
-    ui.add(
-        egui::Slider::new(&mut m.damping, 0.0..=200.0)
-            .logarithmic(true)
-            .text("damping"),
-    );
+    match &mut m.elasticity {
+        Elasticity::Springs {
+            distance_stiffness,
+            damping,
+        } => {
+            ui.add(
+                egui::Slider::new(distance_stiffness, 0.0..=50.0)
+                    .logarithmic(true)
+                    .text("k_D"),
+            );
+            ui.add(
+                egui::Slider::new(damping, 0.0..=200.0)
+                    .logarithmic(true)
+                    .text("damping"),
+            );
+        }
+        Elasticity::Elastic(e) => {
+            ui.add(
+                egui::Slider::new(&mut e.youngs_modulus, 1e3..=1e8)
+                    .logarithmic(true)
+                    .text("Young's modulus (Pa)"),
+            );
+            ui.add(
+                egui::Slider::new(&mut e.damping, 0.0..=0.1)
+                    .logarithmic(true)
+                    .text("damping (s)"),
+            );
+        }
+    }
     ui.add(
         egui::Slider::new(&mut m.linear_damping, 0.0..=5.0)
             .logarithmic(true)

@@ -12,7 +12,7 @@
 //!
 //! // A 4x4x4-cell cube, squeezed from two sides, keeps its volume with the paper's method.
 //! let mesh = box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO).unwrap();
-//! let material = SoftBodyMaterial { method: VolumeMethod::PAPER_IMPULSES, ..Default::default() };
+//! let material = SoftBodyMaterial::JELLY.with_method(VolumeMethod::PAPER_IMPULSES);
 //! let mut body = SoftBodyState::new(mesh.into(), material).unwrap();
 //! for (p, v) in body.positions().to_vec().iter().zip(body.velocities_mut()) {
 //!     v.x = if p.x < 0.2 { 1.0 } else { -1.0 };
@@ -29,6 +29,7 @@ pub mod core;
 mod crew;
 #[cfg(feature = "render")]
 pub mod debug;
+pub mod game_scenes;
 #[cfg(feature = "egui")]
 pub mod inspector;
 #[cfg(feature = "render")]
@@ -60,7 +61,10 @@ pub mod prelude {
         DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
         SoftBodyGravity, SoftBodyStats, StaticCollider,
     };
-    pub use crate::core::{ImpulseSettings, Plasticity, SoftBodyMaterial, TetMesh, VolumeMethod};
+    pub use crate::core::{
+        ElasticSettings, Elasticity, ImpulseSettings, Plasticity, SoftBodyMaterial, TetMesh,
+        VolumeMethod,
+    };
     #[cfg(feature = "render")]
     pub use crate::loading::{
         SoftBodyAssetPlugin, SoftBodyFromAsset, SoftBodySource, TetMeshAsset,

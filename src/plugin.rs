@@ -23,11 +23,14 @@ use crate::crew;
 pub enum SoftBodySet {
     /// Place new bodies, clear last step's counters, apply pinned and driven particles.
     Prepare,
-    /// Gravity, springs with damping, baseline volume forces; the velocities of spheres.
+    /// Gravity, the paper's springs with damping, baseline volume forces; the velocities of
+    /// spheres.
     Forces,
-    /// Contacts on the previewed positions, so the volume passes see them.
+    /// Contacts on the previewed positions, so the volume passes see them; a shape solved in
+    /// substeps (a physical material's edges, XPBD's whole step) is solved here, meeting the
+    /// contacts in each substep.
     Contacts,
-    /// The one-ring volume impulses (for the XPBD method, its whole substepped solve).
+    /// The one-ring volume impulses.
     OneRing,
     /// The per-tet correction scaled by gamma.
     PerTet,
@@ -314,10 +317,10 @@ pub struct SoftBodyStepTime {
 pub struct SoftBodyStageTimes {
     /// [`SoftBodySet::Forces`].
     pub forces_ms: f64,
-    /// [`SoftBodySet::Contacts`].
+    /// [`SoftBodySet::Contacts`]: the first contact pass, and the substepped shape solves
+    /// (XPBD's whole step, a physical material's edges), which meet the contacts.
     pub contacts_ms: f64,
-    /// [`SoftBodySet::OneRing`]: the one-ring pass, with its clamp bounds (for XPBD, its
-    /// whole substepped solve).
+    /// [`SoftBodySet::OneRing`]: the one-ring pass, with its clamp bounds.
     pub one_ring_ms: f64,
     /// [`SoftBodySet::PerTet`].
     pub per_tet_ms: f64,
@@ -681,13 +684,21 @@ fn apply_forces(
 /// A large body alone has its particles against the static colliders, and `after`, in
 /// chunks on the threads (the parallelism `after` gets); against the spheres they go one
 /// after another (each push moves the sphere the next particle meets).
-/// XPBD bodies resolve their contacts in their substeps.
+/// Bodies stepped in substeps meet the colliders there (`SoftBodyState::shape_pass`, which
+/// the first pass's `after` runs), not in these passes.
 fn contact_pass(
     h: f32,
     solver: &mut SolverSpheres,
     bodies: &mut Bodies,
     compute: &ComputePool,
-    after: impl Fn(&mut SoftBodyState, &mut SoftBodyStats, &dyn Parallel) + Send + Sync,
+    after: impl Fn(
+        &mut SoftBodyState,
+        &mut SoftBodyStats,
+        &mut [RigidSphereState],
+        &[ColliderInstance],
+        &dyn Parallel,
+    ) + Send
+    + Sync,
 ) {
     for sphere in solver.states.iter_mut() {
         sphere.resolve_static_contacts(h, &solver.colliders);
@@ -695,11 +706,11 @@ fn contact_pass(
     let few = few_bodies(bodies, compute);
     par_with_spheres(bodies, solver, compute, |s, stats, spheres, colliders| {
         let parallel = pass_parallelism(few, s, compute);
-        if !s.material().method.is_xpbd() {
+        if !s.material().is_substepped() {
             stats.contacts += s.resolve_sphere_contacts(h, spheres)
                 + s.resolve_static_contacts_on(h, colliders, parallel);
         }
-        after(s, stats, parallel);
+        after(s, stats, spheres, colliders, parallel);
     });
 }
 
@@ -723,7 +734,9 @@ fn resolve_contacts(
         &mut solver,
         &mut bodies,
         &ComputePool::new(&threads),
-        |_, _, _| {},
+        |s, stats, spheres, colliders, parallel| {
+            stats.contacts += s.shape_pass(h, spheres, colliders, parallel)
+        },
     );
     clock.add_stage(start, |s| &mut s.contacts_ms);
 }
@@ -742,15 +755,9 @@ fn one_ring(
     let start = Instant::now();
     let compute = ComputePool::new(&threads);
     let few = few_bodies(&bodies, &compute);
-    par_with_spheres(
-        &mut bodies,
-        &mut solver,
-        &compute,
-        |s, stats, spheres, colliders| {
-            stats.contacts += s.xpbd_pass(h, spheres, colliders);
-            s.one_ring_pass_on(h, spheres, pass_parallelism(few, s, &compute));
-        },
-    );
+    par_with_spheres(&mut bodies, &mut solver, &compute, |s, _, spheres, _| {
+        s.one_ring_pass_on(h, spheres, pass_parallelism(few, s, &compute));
+    });
     clock.add_stage(start, |s| &mut s.one_ring_ms);
 }
 
@@ -823,7 +830,7 @@ fn integrate(
         solver_spheres,
         &mut bodies,
         &compute,
-        |s, stats, parallel| {
+        |s, stats, _, _, parallel| {
             s.integrate_positions_on(h, parallel);
             stats.steps += 1;
         },
@@ -856,25 +863,31 @@ impl Drop for DismissCrew {
 }
 
 fn writeback(
-    mut bodies: Query<(&SoftBody, &mut SoftBodyStats, &mut Transform)>,
+    mut bodies: Query<(Entity, &SoftBody, &mut SoftBodyStats, &mut Transform)>,
     threads: Res<SoftBodyThreads>,
+    mut errors: MessageWriter<SoftBodyError>,
 ) {
-    let write =
-        |(body, mut stats, mut transform): (&SoftBody, Mut<SoftBodyStats>, Mut<Transform>)| {
-            if !body.placed {
-                return;
-            }
-            let m = body.state.volume_metrics();
-            stats.volume_error_pct = m.volume_error_pct;
-            stats.peak_volume_error_pct = stats.peak_volume_error_pct.max(m.volume_error_pct.abs());
-            stats.mean_abs_tet_error_pct = m.mean_abs_tet_error_pct;
-            stats.inverted_tets = m.inverted_tets;
-            stats.max_inverted_tets = stats.max_inverted_tets.max(m.inverted_tets);
-            stats.step_ms = body.step_time.as_secs_f64() * 1e3;
-            stats.total_step_ms += stats.step_ms;
-            stats.counters = body.state.counters();
-            transform.translation = body.state.centre_of_mass();
-        };
+    type Written<'a> = (
+        Entity,
+        &'a SoftBody,
+        Mut<'a, SoftBodyStats>,
+        Mut<'a, Transform>,
+    );
+    let write = |(_, body, mut stats, mut transform): Written| {
+        if !body.placed {
+            return;
+        }
+        let m = body.state.volume_metrics();
+        stats.volume_error_pct = m.volume_error_pct;
+        stats.peak_volume_error_pct = stats.peak_volume_error_pct.max(m.volume_error_pct.abs());
+        stats.mean_abs_tet_error_pct = m.mean_abs_tet_error_pct;
+        stats.inverted_tets = m.inverted_tets;
+        stats.max_inverted_tets = stats.max_inverted_tets.max(m.inverted_tets);
+        stats.step_ms = body.step_time.as_secs_f64() * 1e3;
+        stats.total_step_ms += stats.step_ms;
+        stats.counters = body.state.counters();
+        transform.translation = body.state.centre_of_mass();
+    };
     // A single body on this thread, as in the stages (`for_each_body`): a parallel query hands
     // it to a pool thread, which may have to wake up and has little of the body in its caches
     // (the soft cube's writeback, two threads, four runs: 50-78 us a step, inline 39-42; one
@@ -887,7 +900,31 @@ fn writeback(
             .batching_strategy(ONE_BODY_PER_TASK)
             .for_each(write);
     }
+    for (entity, body, mut stats, _) in &mut bodies {
+        let Some(runaway) = body.state.runaway() else {
+            continue;
+        };
+        // Reported once per spell: a body that runs away again within a second of steps of
+        // the last time is counted, not reported again.
+        let quiet = stats
+            .last_runaway_step
+            .is_none_or(|last| stats.steps >= last + RUNAWAY_REPORT_GAP_STEPS);
+        stats.runaway_resets += 1;
+        stats.last_runaway_step = Some(stats.steps);
+        if quiet {
+            report(
+                &mut errors,
+                SoftBodyError {
+                    body: entity,
+                    kind: SoftBodyErrorKind::Runaway(runaway),
+                },
+            );
+        }
+    }
 }
+
+/// Steps without a runaway after which a body's next runaway is reported again.
+const RUNAWAY_REPORT_GAP_STEPS: u64 = 100;
 
 #[cfg(test)]
 mod tests {

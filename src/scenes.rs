@@ -19,8 +19,8 @@ use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, StaticCollider,
 };
 use crate::core::{
-    Plasticity, Resolution, SoftBodyMaterial, TetMesh, TriangleSurface, VolumeMethod, box_grid,
-    parse_obj, tetrahedralize,
+    Elasticity, Plasticity, Resolution, SoftBodyMaterial, TetMesh, TriangleSurface, VolumeMethod,
+    box_grid, parse_obj, tetrahedralize,
 };
 use crate::plugin::{SoftBodyPlugin, SoftBodySet};
 
@@ -217,8 +217,10 @@ impl PaperScene {
         let params = self.params();
         SoftBodyMaterial {
             density: params.density,
-            distance_stiffness: self.distance_stiffness(),
-            damping: params.damping,
+            elasticity: Elasticity::Springs {
+                distance_stiffness: self.distance_stiffness(),
+                damping: params.damping,
+            },
             linear_damping: params.linear_damping,
             friction: 0.6,
             method,

@@ -49,11 +49,19 @@ static GLOBAL: Counting = Counting;
 
 #[test]
 fn steps_allocate_nothing_after_the_first() {
-    for method in [
-        VolumeMethod::PAPER_BASELINE,
-        VolumeMethod::PAPER_IMPULSES,
-        VolumeMethod::XPBD,
-    ] {
+    // The paper's springs and a physical material (its shape in substeps), every method.
+    let materials = [
+        SoftBodyMaterial::paper(1000.0, 1.0, 1.0),
+        SoftBodyMaterial::JELLY,
+    ];
+    for (base, method) in materials.into_iter().flat_map(|m| {
+        [
+            VolumeMethod::PAPER_BASELINE,
+            VolumeMethod::PAPER_IMPULSES,
+            VolumeMethod::XPBD,
+        ]
+        .map(|method| (m, method))
+    }) {
         let mesh = box_grid(UVec3::new(6, 4, 5), Vec3::splat(0.1), Vec3::ZERO).unwrap();
         let material = SoftBodyMaterial {
             method,
@@ -62,7 +70,7 @@ fn steps_allocate_nothing_after_the_first() {
                 creep: 4.0,
                 max_strain: 0.5,
             }),
-            ..Default::default()
+            ..base
         };
         let mut body = SoftBodyState::new(mesh.into(), material).unwrap();
         // Squeezed and falling on the ground with a sphere landing on it: every pass has work.

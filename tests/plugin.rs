@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
-use bevy_soft_body::core::{TetMesh, TetMeshError, VolumeMethod, box_grid};
+use bevy_soft_body::core::{Elasticity, TetMesh, TetMeshError, VolumeMethod, box_grid};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::{SoftBodyStageTimes, SoftBodyStepTime};
 use glam::UVec3;
@@ -27,9 +27,8 @@ fn cube(cells: u32) -> Arc<TetMesh> {
 
 fn material(method: VolumeMethod) -> SoftBodyMaterial {
     SoftBodyMaterial {
-        distance_stiffness: 1.0,
         method,
-        ..Default::default()
+        ..SoftBodyMaterial::paper(1000.0, 1.0, 1.0)
     }
 }
 
@@ -179,9 +178,22 @@ fn bad_input_gives_errors_not_panics() {
     };
     assert!(SoftBody::new(cube(1), bad).is_err());
     let bad = SoftBodyMaterial {
-        damping: f32::NAN,
+        elasticity: Elasticity::Springs {
+            distance_stiffness: 1.0,
+            damping: f32::NAN,
+        },
         ..Default::default()
     };
+    assert!(SoftBody::new(cube(1), bad).is_err());
+    let mut bad = SoftBodyMaterial::JELLY;
+    if let Elasticity::Elastic(e) = &mut bad.elasticity {
+        e.youngs_modulus = -1.0;
+    }
+    assert!(SoftBody::new(cube(1), bad).is_err());
+    let mut bad = SoftBodyMaterial::JELLY;
+    if let Elasticity::Elastic(e) = &mut bad.elasticity {
+        e.max_substep = 0.0;
+    }
     assert!(SoftBody::new(cube(1), bad).is_err());
     let bad = SoftBodyMaterial {
         method: VolumeMethod::Impulses(ImpulseSettings {

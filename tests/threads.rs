@@ -44,10 +44,7 @@ fn simulate(threads: usize, max_threads: usize, keep_awake: bool, one_body: bool
         let mesh = box_grid(UVec3::splat(12), Vec3::splat(0.05), Vec3::ZERO).unwrap();
         // Enough blocks for every thread.
         assert!(mesh.blocks().count() >= 16, "{}", mesh.blocks().count());
-        let material = SoftBodyMaterial {
-            distance_stiffness: 0.2,
-            ..Default::default()
-        };
+        let material = SoftBodyMaterial::paper(1000.0, 0.2, 1.0);
         app.world_mut().spawn((
             SoftBody::new(mesh.into(), material).unwrap(),
             Transform::from_xyz(0.0, 0.01, 0.0),

@@ -22,7 +22,7 @@ use super::contacts::{ChunkFindings, RigidSphereState, in_particle_chunks};
 use super::geometry::{signed_volume, volume_gradients};
 use super::impulses::{ClampMotion, PassWorker};
 use super::lanes::Point4;
-use super::material::{MaterialError, SoftBodyMaterial, VolumeMethod};
+use super::material::{Elasticity, MaterialError, SoftBodyMaterial, VolumeMethod};
 use super::parallel::{BlockFlags, Parallel, Phase, Serial, SharedSlice, run_phases};
 use super::tet_mesh::TetMesh;
 
@@ -81,7 +81,7 @@ pub struct SoftBodyState {
     pub(crate) mesh: Arc<TetMesh>,
     pub(crate) positions: Vec<Vec3>,
     /// Positions at the start of the last step, to interpolate between steps when rendering.
-    previous_positions: Vec<Vec3>,
+    pub(crate) previous_positions: Vec<Vec3>,
     pub(crate) velocities: Vec<Vec3>,
     pub(crate) masses: Vec<f32>,
     /// Inverse masses as used in this step: zero for kinematic particles.
@@ -94,6 +94,14 @@ pub struct SoftBodyState {
     pub(crate) spring_rest: Vec<f32>,
     /// Plastic strain `e_p` of each spring.
     plastic_strain: Vec<f32>,
+    /// Each spring's `k_D` (J) from the material's [`Elasticity`]: the same for every spring
+    /// with the paper's springs, `E` times the volume of the tets around it for a physical
+    /// material.
+    pub(crate) edge_stiffness: Vec<f32>,
+    /// `1 / edge_stiffness`: each edge constraint's compliance in the substepped solvers.
+    pub(crate) edge_compliance: Vec<f32>,
+    /// Each spring's damper (N s/m).
+    pub(crate) edge_damping: Vec<f32>,
     /// Each spring's unit direction this step (zero for a spring of no length), from its force
     /// to its damper: one root and one division per spring instead of two.
     spring_directions: Vec<Vec3>,
@@ -130,6 +138,16 @@ pub struct SoftBodyState {
     pub(crate) sphere_positions: Vec<Vec3>,
     /// One per chunk of particles: what each job of the contacts and the integration found.
     pub(crate) chunk_findings: Vec<ChunkFindings>,
+    /// When the body counts as running away (see `runaway.rs`).
+    pub(crate) runaway_limits: super::runaway::RunawayLimits,
+    /// The runaway caught in this step, if any.
+    pub(crate) runaway: Option<super::runaway::Runaway>,
+    /// The centre of mass at the end of the last step that was not a runaway.
+    pub(crate) sane_centre: Option<Vec3>,
+    /// The diagonal of the rest shape's bounding box.
+    pub(crate) rest_extent: f32,
+    /// The shortest rest edge, for the substeps a fast body needs.
+    pub(crate) shortest_edge: f32,
     /// Per vertex, whether its ring was past its tolerance when its impulse last checked it:
     /// a guess of whether it will be again, which decides only how the check is computed,
     /// never its result (see `PassView::ring_impulse`).
@@ -146,6 +164,7 @@ impl SoftBodyState {
             .iter()
             .map(|&[i, j]| mesh.positions()[i as usize].distance(mesh.positions()[j as usize]))
             .collect();
+        let shortest_edge = spring_rest0.iter().copied().fold(f32::INFINITY, f32::min);
         let mut body = SoftBodyState {
             positions: mesh.positions().to_vec(),
             previous_positions: mesh.positions().to_vec(),
@@ -156,6 +175,9 @@ impl SoftBodyState {
             kinematic: Vec::with_capacity(n),
             spring_rest: spring_rest0.clone(),
             plastic_strain: vec![0.0; spring_rest0.len()],
+            edge_stiffness: vec![0.0; spring_rest0.len()],
+            edge_compliance: vec![0.0; spring_rest0.len()],
+            edge_damping: vec![0.0; spring_rest0.len()],
             spring_directions: vec![Vec3::ZERO; spring_rest0.len()],
             spring_rest0,
             material,
@@ -174,10 +196,63 @@ impl SoftBodyState {
             sphere_positions: Vec::new(),
             chunk_findings: ChunkFindings::for_particles(n),
             ring_corrected: vec![false; n],
+            runaway_limits: Default::default(),
+            runaway: None,
+            sane_centre: None,
+            shortest_edge,
+            rest_extent: {
+                let (lo, hi) = mesh.bounds();
+                (hi - lo).length()
+            },
             mesh,
         };
         body.update_masses();
+        body.update_elasticity();
         Ok(body)
+    }
+
+    /// Fills the springs' stiffnesses, compliances and dampers from the material.
+    fn update_elasticity(&mut self) {
+        match self.material.elasticity {
+            Elasticity::Springs {
+                distance_stiffness,
+                damping,
+            } => {
+                self.edge_stiffness.fill(distance_stiffness);
+                self.edge_damping.fill(damping);
+            }
+            Elasticity::Elastic(e) => {
+                // Each tet's volume to each of its six edges.
+                let mesh = &*self.mesh;
+                let index: std::collections::HashMap<[u32; 2], usize> = mesh
+                    .edges()
+                    .iter()
+                    .enumerate()
+                    .map(|(k, &[i, j])| ([i.min(j), i.max(j)], k))
+                    .collect();
+                self.edge_stiffness.fill(0.0);
+                for (tet, &v0) in mesh.tets().iter().zip(mesh.rest_volumes()) {
+                    for (a, b) in [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)] {
+                        let (i, j) = (tet[a], tet[b]);
+                        if let Some(&k) = index.get(&[i.min(j), i.max(j)]) {
+                            self.edge_stiffness[k] += e.youngs_modulus * v0;
+                        }
+                    }
+                }
+                for ((c, &k), &rest) in self
+                    .edge_damping
+                    .iter_mut()
+                    .zip(&self.edge_stiffness)
+                    .zip(&self.spring_rest0)
+                {
+                    // A spring constant `k_D / D0^2` (N/m), times `beta`.
+                    *c = e.damping * k / (rest * rest);
+                }
+            }
+        }
+        for (c, &k) in self.edge_compliance.iter_mut().zip(&self.edge_stiffness) {
+            *c = if k > 0.0 { 1.0 / k } else { f32::INFINITY };
+        }
     }
 
     fn update_masses(&mut self) {
@@ -256,9 +331,13 @@ impl SoftBodyState {
     pub fn set_material(&mut self, material: SoftBodyMaterial) -> Result<(), MaterialError> {
         material.validate()?;
         let density_changed = material.density != self.material.density;
+        let elasticity_changed = material.elasticity != self.material.elasticity;
         self.material = material;
         if density_changed {
             self.update_masses();
+        }
+        if elasticity_changed {
+            self.update_elasticity();
         }
         Ok(())
     }
@@ -299,6 +378,7 @@ impl SoftBodyState {
     /// Starts a step: clears the counters and last step's contacts.
     pub fn begin_step(&mut self) {
         self.counters = StepCounters::default();
+        self.runaway = None;
         self.previous_positions.copy_from_slice(&self.positions);
         self.clamp_bounds.taken_this_step = false;
         for &i in &self.touching {
@@ -327,11 +407,19 @@ impl SoftBodyState {
     }
 
     /// The dampers of all springs, in index order, which is the blocks' (see [`damp_spring`]).
-    pub(crate) fn damp_springs(&mut self, h: f32, damping: f32) {
+    pub(crate) fn damp_springs(&mut self, h: f32) {
         let velocities = SharedSlice::new(&mut self.velocities);
-        for &edge in self.mesh.edges() {
+        for (&edge, &damping) in self.mesh.edges().iter().zip(&self.edge_damping) {
             let dir = spring_direction(&self.positions, edge).0;
             damp_spring(edge, dir, &self.inv_masses, velocities, h, damping);
+        }
+    }
+
+    /// Whether any spring has a damper.
+    pub(crate) fn any_damping(&self) -> bool {
+        match self.material.elasticity {
+            Elasticity::Springs { damping, .. } => damping > 0.0,
+            Elasticity::Elastic(e) => e.damping > 0.0,
         }
     }
 
@@ -346,8 +434,8 @@ impl SoftBodyState {
     /// particle's velocity takes its force, then the dampers act block by block, then drag.
     pub fn apply_forces_on(&mut self, h: f32, gravity: Vec3, parallel: &dyn Parallel) {
         self.gravity = gravity;
-        if self.material.method.is_xpbd() {
-            // Gravity, springs, damping and drag act inside the substeps (`xpbd_pass`); only
+        if self.material.is_substepped() {
+            // Gravity, springs, damping and drag act inside the substeps (`shape_pass`); only
             // the kinematic particles are set moving here.
             for &(i, target) in &self.kinematic {
                 let i = i as usize;
@@ -358,8 +446,8 @@ impl SoftBodyState {
         let mesh = &*self.mesh;
         let blocks = mesh.blocks();
         let count = blocks.count();
-        let k_d = self.material.distance_stiffness;
-        let damping = self.material.damping;
+        let any_damping = self.any_damping();
+        let (edge_stiffness, edge_damping) = (&self.edge_stiffness[..], &self.edge_damping[..]);
         let drag = self.material.linear_damping;
         let volume_stiffness = match self.material.method {
             VolumeMethod::Baseline { volume_stiffness } => Some(volume_stiffness),
@@ -386,7 +474,7 @@ impl SoftBodyState {
                 order: None,
             },
             Phase {
-                tasks: if damping > 0.0 { count } else { 0 },
+                tasks: if any_damping { count } else { 0 },
                 order: Some((&blocks.waits_for, dampers_done)),
             },
             Phase {
@@ -408,7 +496,7 @@ impl SoftBodyState {
                         if length <= f32::EPSILON * rest {
                             continue;
                         }
-                        let f = dir * (k_d * (length - rest) / (rest * rest));
+                        let f = dir * (edge_stiffness[e] * (length - rest) / (rest * rest));
                         forces.set(i, forces.get(i) + f);
                         forces.set(j, forces.get(j) - f);
                     }
@@ -439,8 +527,9 @@ impl SoftBodyState {
                 }
                 2 => {
                     for &e in blocks.edges.row(task) {
-                        let (edge, dir) = (mesh.edges()[e as usize], directions.get(e as usize));
-                        damp_spring(edge, dir, inv_masses, velocities, h, damping);
+                        let e = e as usize;
+                        let (edge, dir) = (mesh.edges()[e], directions.get(e));
+                        damp_spring(edge, dir, inv_masses, velocities, h, edge_damping[e]);
                     }
                 }
                 _ => {
@@ -481,7 +570,7 @@ impl SoftBodyState {
     /// Stage 6: `x += h v`. A particle whose new position would not be finite (only an unstable
     /// explicit baseline gets there) keeps its position, loses its velocity and is counted, so
     /// that one bad particle cannot turn the body, the spheres it touches and the game's
-    /// transforms into NaN.
+    /// transforms into NaN. Then a body that runs away is caught and put back (`runaway.rs`).
     pub fn integrate_positions(&mut self, h: f32) {
         self.integrate_positions_on(h, &Serial);
     }
@@ -489,8 +578,9 @@ impl SoftBodyState {
     /// [`SoftBodyState::integrate_positions`] with the particles in chunks run by `parallel`
     /// (each particle on its own: the same result on any number of threads).
     pub fn integrate_positions_on(&mut self, h: f32, parallel: &dyn Parallel) {
-        if self.material.method.is_xpbd() {
-            // `xpbd_pass` moved the particles through its substeps already.
+        if self.material.is_substepped() {
+            // `shape_pass` moved the particles through its substeps already.
+            self.catch_runaway();
             return;
         }
         let n = self.positions.len();
@@ -512,6 +602,7 @@ impl SoftBodyState {
         for found in &mut self.chunk_findings {
             self.counters.non_finite_velocities += std::mem::take(&mut found.non_finite);
         }
+        self.catch_runaway();
     }
 
     /// Previewed position of particle `i` (valid after `refresh_previews`, during the volume
@@ -586,7 +677,7 @@ impl SoftBodyState {
     pub fn step_free(&mut self, h: f32, gravity: Vec3) {
         self.begin_step();
         self.apply_forces(h, gravity);
-        let _ = self.xpbd_pass(h, &mut [], &[]);
+        let _ = self.shape_pass(h, &mut [], &[], &Serial);
         self.one_ring_pass(h, &mut []);
         self.per_tet_pass(h, &mut []);
         self.apply_plasticity(h);
@@ -618,12 +709,12 @@ impl SoftBodyState {
         parallel: &dyn super::parallel::Parallel,
     ) {
         // Spheres against the colliders, then the particles against both (the ground last).
+        // A body stepped in substeps meets the colliders there.
         let contact_pass = |body: &mut Self, spheres: &mut [RigidSphereState]| {
             for sphere in spheres.iter_mut() {
                 sphere.resolve_static_contacts(h, colliders);
             }
-            // XPBD resolves its contacts inside its substeps.
-            if !body.material.method.is_xpbd() {
+            if !body.material.is_substepped() {
                 body.resolve_sphere_contacts(h, spheres);
                 body.resolve_static_contacts(h, colliders);
             }
@@ -634,7 +725,7 @@ impl SoftBodyState {
             sphere.apply_forces(h, gravity);
         }
         contact_pass(self, spheres);
-        let _ = self.xpbd_pass(h, spheres, colliders);
+        let _ = self.shape_pass(h, spheres, colliders, parallel);
         self.one_ring_pass_on(h, spheres, parallel);
         self.per_tet_pass_on(h, spheres, parallel);
         self.apply_plasticity(h);
@@ -703,12 +794,14 @@ mod tests {
         )
         .unwrap();
         let material = SoftBodyMaterial {
-            distance_stiffness: 0.0,
-            damping,
+            elasticity: Elasticity::Springs {
+                distance_stiffness: 0.0,
+                damping,
+            },
             method: VolumeMethod::Baseline {
                 volume_stiffness: 0.0,
             },
-            ..Default::default()
+            ..SoftBodyMaterial::default()
         };
         SoftBodyState::new(Arc::new(mesh), material).unwrap()
     }

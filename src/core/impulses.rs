@@ -952,6 +952,19 @@ impl SoftBodyState {
         spheres: &mut [RigidSphereState],
         parallel: &dyn Parallel,
     ) {
+        // A body stepped in substeps has its impulses in every substep (`shape_pass`).
+        if !self.material.is_substepped() {
+            self.one_ring_impulses(h, spheres, parallel);
+        }
+    }
+
+    /// The one-ring pass over a step (or substep) of `h`.
+    pub(crate) fn one_ring_impulses(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
         let VolumeMethod::Impulses(settings) = self.material.method else {
             return;
         };
@@ -991,6 +1004,18 @@ impl SoftBodyState {
     /// [`SoftBodyState::per_tet_pass`] with the mesh's blocks run by `parallel`, as
     /// [`SoftBodyState::one_ring_pass_on`].
     pub fn per_tet_pass_on(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        if !self.material.is_substepped() {
+            self.per_tet_impulses(h, spheres, parallel);
+        }
+    }
+
+    /// The per-tet pass over a step (or substep) of `h`.
+    pub(crate) fn per_tet_impulses(
         &mut self,
         h: f32,
         spheres: &mut [RigidSphereState],
@@ -2035,10 +2060,7 @@ mod tests {
     /// tets are far from their rest volume, some below half of it.
     fn shaken_body(strength: f32) -> SoftBodyState {
         let mesh = Arc::new(box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO).unwrap());
-        let material = SoftBodyMaterial {
-            method: VolumeMethod::PAPER_IMPULSES,
-            ..Default::default()
-        };
+        let material = SoftBodyMaterial::paper(1000.0, 1.0, 1.0);
         let mut body = SoftBodyState::new(mesh, material).unwrap();
         let mut seed = 12345u64;
         for v in body.velocities_mut() {

@@ -46,7 +46,7 @@ impl VolumeMethod {
     }
 
     /// Whether this is [`VolumeMethod::Xpbd`], which moves its particles itself (see
-    /// `SoftBodyState::xpbd_pass`).
+    /// `SoftBodyState::shape_pass`).
     pub fn is_xpbd(&self) -> bool {
         matches!(self, VolumeMethod::Xpbd(_))
     }
@@ -148,16 +148,104 @@ pub struct Plasticity {
     pub max_strain: f32,
 }
 
+/// How stiff a body's edges are: what keeps its shape, while the [`VolumeMethod`] keeps its
+/// volume.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Elasticity {
+    /// The paper's springs: `E_D = 1/2 k_D ((L - D0) / D0)^2` on every edge, with a damper of
+    /// `damping` (N s/m) along each, integrated explicitly (its scenes are reproduced with
+    /// these). Stable only while `k_D` is weak for the particles' masses and the step: a game
+    /// material at Earth gravity is not, so games use [`Elasticity::Elastic`].
+    Springs {
+        /// `k_D`, in joules (the energy of an edge at 100 % strain).
+        distance_stiffness: f32,
+        /// Damping along each spring, in force per unit of relative velocity (N s/m), applied
+        /// implicitly so that any value is stable.
+        damping: f32,
+    },
+    /// A physical material: stable at any stiffness and any step (see [`ElasticSettings`]).
+    Elastic(ElasticSettings),
+}
+
+/// A material in physical units, the same whatever the mesh's resolution and the step.
+///
+/// Each edge `e` gets the spring energy `1/2 k_e ((L - D0) / D0)^2` with
+/// `k_e = E * (sum of the volumes of the tets around e)`: for edges pointing every way
+/// equally, that is the strain energy of an isotropic solid of Young's modulus `E` (and
+/// Poisson's ratio 1/4, what a network of edges has; the volume method then makes it almost
+/// incompressible). The edges are solved as XPBD constraints of compliance `1 / k_e`
+/// (Macklin et al. 2016) in substeps of at most `max_substep` seconds, each with gravity and
+/// contacts (the "Small Steps" scheme, Macklin et al. 2019); a step's volume impulses act
+/// once on what the substeps predict. Too stiff for the substep, an edge becomes as stiff as
+/// the substep allows (a rigid rod at most): it never explodes.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ElasticSettings {
+    /// Young's modulus `E`, in pascals. Jelly 10-50 kPa, flesh 50-300 kPa, soft rubber about
+    /// 1 MPa, hard rubber 10 MPa and more.
+    pub youngs_modulus: f32,
+    /// Stiffness-proportional damping `beta`, in seconds: each edge's damper is `beta` times
+    /// its spring constant, so a mode of angular frequency `w` has the damping ratio
+    /// `beta w / 2` (fast, small wobbles die first, a slow swing of the whole body is hardly
+    /// touched; `SoftBodyMaterial::linear_damping` settles those).
+    pub damping: f32,
+    /// The longest substep of the shape solve, in seconds: a step of `h` is cut into
+    /// `ceil(h / max_substep)` substeps, so the body behaves the same at 30 and at 240 Hz.
+    /// Shorter substeps make stiff bodies stiffer (closer to `youngs_modulus`) and cost
+    /// more, in proportion. Default: 1/240 s (four substeps at 60 Hz).
+    pub max_substep: f32,
+    /// The farthest a particle may move in one substep, as a fraction of the mesh's shortest
+    /// edge: a fast body (a landing, a throw) gets more substeps, up to
+    /// [`ElasticSettings::MAX_SUBSTEPS`], so that an impact is met a fraction of a cell at a
+    /// time. Default: 0.1.
+    pub max_motion: f32,
+}
+
+impl ElasticSettings {
+    /// The default substep, 1/240 s.
+    pub const DEFAULT_MAX_SUBSTEP: f32 = 1.0 / 240.0;
+    /// The most substeps a step takes for the motion (see [`ElasticSettings::max_motion`]).
+    pub const MAX_SUBSTEPS: u32 = 64;
+
+    /// A material of Young's modulus `youngs_modulus` (Pa) and stiffness-proportional
+    /// damping `damping` (s), with the default substep.
+    pub const fn new(youngs_modulus: f32, damping: f32) -> Self {
+        ElasticSettings {
+            youngs_modulus,
+            damping,
+            max_substep: Self::DEFAULT_MAX_SUBSTEP,
+            max_motion: 0.1,
+        }
+    }
+
+    /// How many substeps a step of `h` seconds takes, for a body whose fastest particle moves
+    /// at `speed` and whose shortest edge is `shortest_edge` long.
+    pub fn substeps(&self, h: f32, speed: f32, shortest_edge: f32) -> u32 {
+        // A hair of slack, so that 1/60 s in substeps of 1/240 s is four, not five.
+        let for_step = ((h / self.max_substep) * (1.0 - 1e-4))
+            .ceil()
+            .clamp(1.0, 1000.0);
+        let for_motion = (h * speed / (self.max_motion * shortest_edge)).ceil();
+        let for_motion = if for_motion.is_finite() {
+            for_motion.min(Self::MAX_SUBSTEPS as f32)
+        } else {
+            Self::MAX_SUBSTEPS as f32
+        };
+        for_step.max(for_motion) as u32
+    }
+}
+
 /// Everything about a soft body's material.
+///
+/// Start from a preset ([`SoftBodyMaterial::JELLY`], [`FLESH`](SoftBodyMaterial::FLESH),
+/// [`RUBBER`](SoftBodyMaterial::RUBBER), [`HARD_RUBBER`](SoftBodyMaterial::HARD_RUBBER)) or
+/// [`SoftBodyMaterial::elastic`] with a Young's modulus; [`SoftBodyMaterial::paper`] gives the
+/// paper's normalised springs.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SoftBodyMaterial {
-    /// Mass per unit volume; each tet gives a quarter of its mass to each vertex.
+    /// Mass per unit volume, kg/m^3; each tet gives a quarter of its mass to each vertex.
     pub density: f32,
-    /// `k_D`, the spring stiffness of `E_D = 1/2 k_D ((L - D0) / D0)^2` on every edge.
-    pub distance_stiffness: f32,
-    /// Damping along each spring, in force per unit of relative velocity (N s/m), applied
-    /// implicitly so that any value is stable.
-    pub damping: f32,
+    /// What keeps the shape.
+    pub elasticity: Elasticity,
     /// Drag on every particle's velocity, per second (like a rigid body's linear damping in
     /// avian or rapier): each step keeps `1 / (1 + h c)` of it. Spring damping only acts on
     /// how fast springs change length, so it barely touches slow, large motions of a soft
@@ -173,17 +261,75 @@ pub struct SoftBodyMaterial {
     pub plasticity: Option<Plasticity>,
 }
 
-impl Default for SoftBodyMaterial {
-    fn default() -> Self {
+impl SoftBodyMaterial {
+    /// A physical material of `density` (kg/m^3) and Young's modulus `youngs_modulus` (Pa),
+    /// with stiffness-proportional damping `damping` (s), friction 0.5 and the paper's volume
+    /// impulses.
+    pub const fn elastic(density: f32, youngs_modulus: f32, damping: f32) -> Self {
         SoftBodyMaterial {
-            density: 1000.0,
-            distance_stiffness: 1.0,
-            damping: 1.0,
+            density,
+            elasticity: Elasticity::Elastic(ElasticSettings::new(youngs_modulus, damping)),
             linear_damping: 0.0,
             friction: 0.5,
-            method: VolumeMethod::default(),
+            method: VolumeMethod::PAPER_IMPULSES,
             plasticity: None,
         }
+    }
+
+    /// The paper's normalised springs of stiffness `k_D` (J) and damping `damping` (N s/m).
+    pub const fn paper(density: f32, distance_stiffness: f32, damping: f32) -> Self {
+        SoftBodyMaterial {
+            density,
+            elasticity: Elasticity::Springs {
+                distance_stiffness,
+                damping,
+            },
+            linear_damping: 0.0,
+            friction: 0.5,
+            method: VolumeMethod::PAPER_IMPULSES,
+            plasticity: None,
+        }
+    }
+
+    /// A jelly: 1 050 kg/m^3, 20 kPa, wobbles for a second after a landing.
+    pub const JELLY: SoftBodyMaterial = SoftBodyMaterial::elastic(1050.0, 2e4, 0.01);
+    /// Soft flesh: 1 050 kg/m^3, 150 kPa.
+    pub const FLESH: SoftBodyMaterial = SoftBodyMaterial::elastic(1050.0, 1.5e5, 0.005);
+    /// Soft rubber (a toy, a ball): 1 100 kg/m^3, 1 MPa.
+    pub const RUBBER: SoftBodyMaterial = SoftBodyMaterial::elastic(1100.0, 1e6, 0.002);
+    /// Hard rubber (a tyre, a bumper): 1 200 kg/m^3, 10 MPa: as stiff as the substeps allow.
+    pub const HARD_RUBBER: SoftBodyMaterial = SoftBodyMaterial::elastic(1200.0, 1e7, 0.001);
+
+    /// The presets by name (`jelly`, `flesh`, `rubber`, `hard_rubber`), for tables and tools.
+    pub const PRESETS: [(&'static str, SoftBodyMaterial); 4] = [
+        ("jelly", Self::JELLY),
+        ("flesh", Self::FLESH),
+        ("rubber", Self::RUBBER),
+        ("hard_rubber", Self::HARD_RUBBER),
+    ];
+
+    /// Whether a step is cut into substeps: XPBD's own, or a physical material's under the
+    /// paper's impulses (see `SoftBodyState::shape_pass`). The whole step then happens in
+    /// them, contacts and volume included. The paper's springs, and the baseline, are
+    /// integrated explicitly in one step.
+    pub fn is_substepped(&self) -> bool {
+        matches!(
+            (self.method, self.elasticity),
+            (VolumeMethod::Xpbd(_), _) | (VolumeMethod::Impulses(_), Elasticity::Elastic(_))
+        )
+    }
+
+    /// This material with volume method `method`.
+    pub const fn with_method(mut self, method: VolumeMethod) -> Self {
+        self.method = method;
+        self
+    }
+}
+
+impl Default for SoftBodyMaterial {
+    /// [`SoftBodyMaterial::JELLY`].
+    fn default() -> Self {
+        Self::JELLY
     }
 }
 
@@ -229,8 +375,21 @@ impl SoftBodyMaterial {
             }
         }
         positive("density", self.density)?;
-        non_negative("distance_stiffness", self.distance_stiffness)?;
-        non_negative("damping", self.damping)?;
+        match self.elasticity {
+            Elasticity::Springs {
+                distance_stiffness,
+                damping,
+            } => {
+                non_negative("distance_stiffness", distance_stiffness)?;
+                non_negative("damping", damping)?;
+            }
+            Elasticity::Elastic(e) => {
+                non_negative("youngs_modulus", e.youngs_modulus)?;
+                non_negative("damping", e.damping)?;
+                positive("max_substep", e.max_substep)?;
+                positive("max_motion", e.max_motion)?;
+            }
+        }
         non_negative("linear_damping", self.linear_damping)?;
         non_negative("friction", self.friction)?;
         match self.method {

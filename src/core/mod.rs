@@ -12,6 +12,7 @@ pub mod material;
 pub mod obj;
 pub mod parallel;
 pub mod roots;
+pub mod runaway;
 pub mod surface_mesh;
 pub mod tet_mesh;
 pub mod tetgen;
@@ -25,10 +26,12 @@ pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::ImpulseOutcome;
 pub use material::{
-    ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial, VolumeMethod, XpbdSettings,
+    ElasticSettings, Elasticity, ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial,
+    VolumeMethod, XpbdSettings,
 };
 pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
+pub use runaway::{Runaway, RunawayLimits};
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
 pub use tet_mesh::{Blocks, TetMesh, TetMeshError};
 pub use tetgen::{TetGenError, TetGenFile, parse_tetgen, write_tetgen};

@@ -1,8 +1,10 @@
-//! XPBD, the peer the paper's method is measured against (see [`VolumeMethod::Xpbd`]).
+//! Substepped XPBD: the peer the paper's method is measured against (see
+//! [`VolumeMethod::Xpbd`]), and, without its volume constraints, the shape solve of a
+//! physical material under the paper's impulses (see [`SoftBodyState::shape_pass`]).
 //!
 //! Each step is split into substeps. A substep predicts every particle's position from its
 //! velocity and gravity, projects every edge constraint `C = (L - L0) / L0` with compliance
-//! `1 / k_D` (so that its energy is the springs' `1/2 k_D C^2`) and every tet's volume
+//! `1 / k_D` of that edge (so that its energy is the springs' `1/2 k_D C^2`) and every tet's volume
 //! constraint `C = (V - V0) / V0` with zero compliance, once each in Gauss-Seidel order (one
 //! iteration; with a fresh multiplier per substep, as "Small Steps" does), derives the velocities
 //! from the motion, resolves contacts on them with the same code the other methods use, and
@@ -22,31 +24,65 @@ use super::body::SoftBodyState;
 use super::contacts::{ColliderInstance, RigidSphereState};
 use super::geometry::{signed_volume, volume_gradients};
 use super::lanes::Point4;
-use super::material::VolumeMethod;
+use super::material::{Elasticity, VolumeMethod};
+use super::parallel::Parallel;
 
 impl SoftBodyState {
-    /// Stage 3 for [`VolumeMethod::Xpbd`]: the whole step in substeps, contacts included. It
-    /// moves the particles itself, so `integrate_positions` leaves them where they are, and
-    /// the contact passes outside it skip the body. Returns the contacts it resolved (summed
-    /// over the substeps). Does nothing for the other methods.
+    /// The step in substeps (see [`SoftBodyMaterial::is_substepped`]); nothing for a body
+    /// integrated explicitly in one step. Returns the contacts it resolved (summed over the
+    /// substeps). It moves the particles itself, so `integrate_positions` leaves them where
+    /// they are, and the plugin's contact passes skip the body.
     ///
+    /// For [`VolumeMethod::Xpbd`] each substep projects the edges and the tets' volume
+    /// constraints. For a physical material under the paper's impulses each substep is the
+    /// paper's step at the substep's length, with the edges as XPBD constraints in place of
+    /// its explicit springs: gravity, the edges, the contacts and damping give the velocities
+    /// (the previewed positions `x + h_s v` are where the edges put the particles), then the
+    /// one-ring and per-tet impulses restore the volume on those previews, then `x += h_s v`.
+    /// The volume passes run in every substep, not once a step: the edges of a body under a
+    /// load pull its volume towards the spring network's own equilibrium (a Poisson's ratio of
+    /// 1/4), and a body crushed within a step by a landing cannot be restored after it.
+    ///
+    /// [`SoftBodyMaterial::is_substepped`]: super::material::SoftBodyMaterial::is_substepped
     /// [`VolumeMethod::Xpbd`]: super::material::VolumeMethod::Xpbd
-    pub fn xpbd_pass(
+    pub fn shape_pass(
         &mut self,
         h: f32,
         spheres: &mut [RigidSphereState],
         colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
     ) -> u32 {
-        let VolumeMethod::Xpbd(settings) = self.material.method else {
-            return 0;
+        let substeps = match (self.material.method, self.material.elasticity) {
+            (VolumeMethod::Xpbd(s), _) => s.substeps.max(1),
+            (VolumeMethod::Impulses(_), Elasticity::Elastic(e)) => {
+                let speed2 = self
+                    .velocities
+                    .iter()
+                    .fold(0.0f32, |a, v| a.max(v.length_squared()));
+                e.substeps(h, speed2.sqrt(), self.shortest_edge)
+            }
+            _ => return 0,
         };
+        self.substeps(h, substeps, spheres, colliders, parallel)
+    }
+
+    /// `substeps` substeps of a step of `h`: predict with gravity, project the edges (and, for
+    /// XPBD, the tets' volumes) once each, derive the velocities, meet the spheres and
+    /// colliders, damp, apply the paper's volume impulses (for that method), move.
+    fn substeps(
+        &mut self,
+        h: f32,
+        substeps: u32,
+        spheres: &mut [RigidSphereState],
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) -> u32 {
+        let volumes = self.material.method.is_xpbd();
         let mut contacts = 0;
-        let substeps = settings.substeps.max(1);
         let hs = h / substeps as f32;
         let gravity = self.gravity;
-        let k_d = self.material.distance_stiffness;
-        let edge_compliance = if k_d > 0.0 { 1.0 / k_d } else { f32::INFINITY };
-        let alpha = edge_compliance / (hs * hs);
+        let hs2 = hs * hs;
+        let damping = self.any_damping();
         for k in 0..substeps {
             // Predict; `previews` holds where each particle started the substep.
             for i in 0..self.positions.len() {
@@ -56,10 +92,10 @@ impl SoftBodyState {
                 self.previews[i] = Point4::new(self.positions[i]);
                 self.positions[i] += hs * self.velocities[i];
             }
-            if alpha.is_finite() {
-                self.project_edges(alpha);
+            self.project_edges(hs2);
+            if volumes {
+                self.project_volumes();
             }
-            self.project_volumes();
             // Velocities from the motion, then contacts on them from the substep's start.
             for i in 0..self.positions.len() {
                 let v = (self.positions[i] - self.previews[i].vec3()) / hs;
@@ -82,8 +118,8 @@ impl SoftBodyState {
                 s.position = start;
             }
             contacts += self.resolve_static_contacts(hs, colliders);
-            if self.material.damping > 0.0 {
-                self.damp_springs(hs, self.material.damping);
+            if damping {
+                self.damp_springs(hs);
             }
             let drag = self.material.linear_damping;
             if drag > 0.0 {
@@ -94,6 +130,9 @@ impl SoftBodyState {
                     }
                 }
             }
+            // The paper's impulses (nothing for XPBD), on the previews `x + hs v`.
+            self.one_ring_impulses(hs, spheres, parallel);
+            self.per_tet_impulses(hs, spheres, parallel);
             for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
                 *x += hs * *v;
             }
@@ -101,12 +140,12 @@ impl SoftBodyState {
         contacts
     }
 
-    /// One Gauss-Seidel pass over the edge constraints, compliance `alpha` already divided by
-    /// the squared substep, in the blocks' order of the springs (see
-    /// [`Blocks::edges`](super::tet_mesh::Blocks::edges)): the same order the other methods'
-    /// dampers take, where consecutive constraints share no particle and do not wait for each
-    /// other's results.
-    fn project_edges(&mut self, alpha: f32) {
+    /// One Gauss-Seidel pass over the edge constraints, each of compliance
+    /// `edge_compliance / hs2` (`hs2` the squared substep), in the blocks' order of the springs
+    /// (see [`Blocks::edges`](super::tet_mesh::Blocks::edges)): the same order the other
+    /// methods' dampers take, where consecutive constraints share no particle and do not wait
+    /// for each other's results. An edge of zero stiffness (infinite compliance) is skipped.
+    fn project_edges(&mut self, hs2: f32) {
         let x = &mut self.positions;
         let edges = self.mesh.edges();
         for &e in self.mesh.blocks().edges.items() {
@@ -114,7 +153,8 @@ impl SoftBodyState {
             let [i, j] = edges[e];
             let (i, j) = (i as usize, j as usize);
             let (wi, wj) = (self.inv_masses[i], self.inv_masses[j]);
-            if wi + wj == 0.0 {
+            let alpha = self.edge_compliance[e] / hs2;
+            if wi + wj == 0.0 || !alpha.is_finite() {
                 continue;
             }
             let d = x[j] - x[i];

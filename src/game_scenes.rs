@@ -1,0 +1,495 @@
+//! Scenes at game scale, beside the paper's: Earth gravity, bodies of 0.2 to 2 m, materials
+//! from jelly to hard rubber, the crate's own grids and irregular meshes. `game_figures` runs
+//! them for every method and step rate; the tests hold the paper's method to them.
+//!
+//! A scene is built on the simulation core ([`GameScene::world`]): the body, the ground and
+//! any rigid sphere, stepped by [`GameWorld::step`] exactly as the plugin steps one body
+//! (`SoftBodyState::step_with_contacts`), so that a table of hundreds of runs takes seconds.
+//! [`GameScene::spawn`] puts the same scene in a Bevy app.
+
+use std::sync::Arc;
+
+use bevy::prelude::*;
+use glam::UVec3;
+use parry3d::math::Pose;
+use parry3d::shape::SharedShape;
+
+use crate::components::{RigidSphere, SoftBody, StaticCollider};
+use crate::core::{
+    ColliderInstance, Resolution, RigidSphereState, SoftBodyMaterial, SoftBodyState, TetMesh,
+    VolumeMethod, box_grid, tetrahedralize, uv_sphere,
+};
+
+/// Earth's gravity, m/s^2.
+pub const EARTH_GRAVITY: f32 = 9.81;
+
+/// The shape of a scene's body.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum GameShape {
+    /// A cube of this side, m, of `cells` grid cells a side.
+    Cube {
+        /// Side, m.
+        size: f32,
+        /// Cells a side.
+        cells: u32,
+    },
+    /// A box of these sides, m, of cells of about `cell` m.
+    Block {
+        /// Sides, m.
+        size: Vec3,
+        /// Cell size, m.
+        cell: f32,
+    },
+    /// A sphere of this diameter, m, tetrahedralized from a triangle surface to about `tets`.
+    Sphere {
+        /// Diameter, m.
+        diameter: f32,
+        /// Tets wanted.
+        tets: u32,
+    },
+    /// The paper scenes' creature, scaled to this height, m, tetrahedralized to about `tets`.
+    Creature {
+        /// Height, m.
+        height: f32,
+        /// Tets wanted.
+        tets: u32,
+    },
+}
+
+/// How a grid body's mesh is distorted, to stand for the irregular meshes other tools write.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum MeshStyle {
+    /// The crate's own regular grid.
+    Grid,
+    /// Every vertex moved by up to this fraction of a cell along each axis (not off the
+    /// box's faces), seeded: slivers with dihedral angles down to a few degrees.
+    Jittered(f32),
+    /// Cells graded along every axis so that the widest is this many times the narrowest:
+    /// edge lengths spread over that ratio, short edges on light particles.
+    Graded(f32),
+}
+
+/// A rigid sphere dropped on the body.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GameSphere {
+    /// Radius, m.
+    pub radius: f32,
+    /// Mass, kg.
+    pub mass: f32,
+    /// Height of its lowest point above the body's top, m (0: resting on it).
+    pub gap: f32,
+}
+
+/// A scene at game scale.
+#[derive(Clone, Debug, PartialEq)]
+pub struct GameScene {
+    /// Name for tables (`jelly_cube_drop`, ...).
+    pub name: String,
+    /// The body's shape.
+    pub shape: GameShape,
+    /// How its mesh is distorted.
+    pub mesh: MeshStyle,
+    /// Name of its material.
+    pub material_name: &'static str,
+    /// Its material (the method is set per run).
+    pub material: SoftBodyMaterial,
+    /// Height of its lowest point above the ground at the start, m.
+    pub lift: f32,
+    /// A rigid sphere on it, if any.
+    pub sphere: Option<GameSphere>,
+    /// Simulated seconds.
+    pub duration_secs: f32,
+}
+
+/// What can go wrong building a scene's mesh.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("scene `{scene}`: {reason}")]
+pub struct GameSceneError {
+    /// The scene.
+    pub scene: String,
+    /// Why.
+    pub reason: String,
+}
+
+impl GameScene {
+    /// A scene of `shape` made of the preset `material_name` (see
+    /// [`SoftBodyMaterial::PRESETS`]), dropped from `lift`, for 3 s.
+    pub fn new(name: &str, shape: GameShape, material_name: &'static str, lift: f32) -> Self {
+        let material = SoftBodyMaterial::PRESETS
+            .iter()
+            .find(|(n, _)| *n == material_name)
+            .map_or(SoftBodyMaterial::JELLY, |(_, m)| *m);
+        GameScene {
+            name: name.to_string(),
+            shape,
+            mesh: MeshStyle::Grid,
+            material_name,
+            material,
+            lift,
+            sphere: None,
+            duration_secs: 3.0,
+        }
+    }
+
+    /// The scenes `game_figures` runs and the tests check: every game situation the issue
+    /// names, a cube in every preset, and the same cube on irregular meshes.
+    pub fn standard() -> Vec<GameScene> {
+        let cube = |size, cells| GameShape::Cube { size, cells };
+        let mut scenes = vec![
+            GameScene::new("jelly_cube_small", cube(0.2, 6), "jelly", 0.3),
+            GameScene::new("jelly_cube_large", cube(2.0, 10), "jelly", 3.0),
+            GameScene::new(
+                "jelly_sphere",
+                GameShape::Sphere {
+                    diameter: 0.6,
+                    tets: 2500,
+                },
+                "jelly",
+                1.0,
+            ),
+            GameScene::new(
+                "rubber_ball",
+                GameShape::Sphere {
+                    diameter: 0.3,
+                    tets: 1500,
+                },
+                "rubber",
+                2.0,
+            ),
+            GameScene {
+                sphere: Some(GameSphere {
+                    radius: 0.2,
+                    mass: 100.0,
+                    gap: 1.0,
+                }),
+                ..GameScene::new(
+                    "heavy_sphere_on_jelly",
+                    GameShape::Block {
+                        size: Vec3::new(1.0, 0.4, 1.0),
+                        cell: 0.1,
+                    },
+                    "jelly",
+                    0.0,
+                )
+            },
+            GameScene::new(
+                "creature_landing",
+                GameShape::Creature {
+                    height: 1.2,
+                    tets: 2500,
+                },
+                "flesh",
+                1.0,
+            ),
+            GameScene {
+                sphere: Some(GameSphere {
+                    radius: 0.3,
+                    mass: 60.0,
+                    gap: 0.0,
+                }),
+                ..GameScene::new(
+                    "sphere_on_soft_block",
+                    GameShape::Block {
+                        size: Vec3::new(1.0, 0.5, 1.0),
+                        cell: 0.1,
+                    },
+                    "flesh",
+                    0.0,
+                )
+            },
+        ];
+        for (material, _) in SoftBodyMaterial::PRESETS {
+            scenes.push(GameScene::new(
+                &format!("{material}_cube_drop"),
+                cube(0.5, 8),
+                material,
+                1.0,
+            ));
+        }
+        for (style, label) in [
+            (MeshStyle::Jittered(0.3), "jittered"),
+            (MeshStyle::Graded(10.0), "graded"),
+        ] {
+            for material in ["jelly", "hard_rubber"] {
+                scenes.push(GameScene {
+                    mesh: style,
+                    ..GameScene::new(
+                        &format!("{material}_cube_{label}"),
+                        cube(0.5, 8),
+                        material,
+                        1.0,
+                    )
+                });
+            }
+        }
+        scenes
+    }
+
+    /// The body's tet mesh in its own frame, its lowest point at y = 0, centred in x and z.
+    pub fn tet_mesh(&self) -> Result<TetMesh, GameSceneError> {
+        let error = |reason: String| GameSceneError {
+            scene: self.name.clone(),
+            reason,
+        };
+        let mesh = match self.shape {
+            GameShape::Cube { size, cells } => box_grid(
+                UVec3::splat(cells),
+                Vec3::splat(size / cells as f32),
+                Vec3::ZERO,
+            )
+            .map_err(|e| error(e.to_string()))?,
+            GameShape::Block { size, cell } => {
+                let cells = (size / cell).round().max(Vec3::ONE).as_uvec3();
+                box_grid(cells, size / cells.as_vec3(), Vec3::ZERO)
+                    .map_err(|e| error(e.to_string()))?
+            }
+            GameShape::Sphere { diameter, tets } => {
+                let surface = uv_sphere(Vec3::ZERO, 0.5 * diameter, 48, 24);
+                tetrahedralize(
+                    &surface.positions,
+                    &surface.indices,
+                    Resolution::TargetTets(tets),
+                )
+                .map_err(|e| error(e.to_string()))?
+                .mesh
+            }
+            GameShape::Creature { height, tets } => {
+                let surface = crate::scenes::creature_surface();
+                let (lo, hi) = crate::scenes::creature_bounds();
+                let scale = height / (hi.y - lo.y);
+                let positions: Vec<Vec3> = surface.positions.iter().map(|p| *p * scale).collect();
+                tetrahedralize(&positions, &surface.indices, Resolution::TargetTets(tets))
+                    .map_err(|e| error(e.to_string()))?
+                    .mesh
+            }
+        };
+        let mesh = distort(mesh, self.mesh).map_err(|e| error(e.to_string()))?;
+        // Lowest point at y = 0, centred in x and z.
+        let (lo, hi) = mesh.bounds();
+        let shift = Vec3::new(-0.5 * (lo.x + hi.x), -lo.y, -0.5 * (lo.z + hi.z));
+        let positions = mesh.positions().iter().map(|p| *p + shift).collect();
+        TetMesh::new(positions, mesh.tets().to_vec()).map_err(|e| error(e.to_string()))
+    }
+
+    /// The scene on the simulation core, with the body's material under `method`.
+    pub fn world(&self, method: VolumeMethod) -> Result<GameWorld, GameSceneError> {
+        let mesh = Arc::new(self.tet_mesh()?);
+        let material = self.material.with_method(method);
+        let mut body = SoftBodyState::new(mesh.clone(), material).map_err(|e| GameSceneError {
+            scene: self.name.clone(),
+            reason: e.to_string(),
+        })?;
+        body.translate(Vec3::Y * self.lift);
+        let (_, hi) = mesh.bounds();
+        let spheres = self
+            .sphere
+            .iter()
+            .map(|s| RigidSphereState {
+                position: Vec3::new(0.0, self.lift + hi.y + s.gap + s.radius, 0.0),
+                velocity: Vec3::ZERO,
+                radius: s.radius,
+                inv_mass: 1.0 / s.mass,
+                friction: 0.5,
+            })
+            .collect();
+        let ground = ColliderInstance::new(SharedShape::halfspace(Vec3::Y), Pose::IDENTITY, 0.8);
+        Ok(GameWorld {
+            rest_height: hi.y,
+            body,
+            spheres,
+            colliders: vec![ground],
+            gravity: Vec3::new(0.0, -EARTH_GRAVITY, 0.0),
+        })
+    }
+
+    /// Spawns the scene in a Bevy app (the body, a ground, the sphere), with the body's material
+    /// under `method`, shifted by `offset`. Returns the body's entity.
+    pub fn spawn(
+        &self,
+        commands: &mut Commands,
+        method: VolumeMethod,
+        offset: Vec3,
+    ) -> Result<Entity, GameSceneError> {
+        let world = self.world(method)?;
+        let mesh = world.body.mesh().clone();
+        let body =
+            SoftBody::new(mesh, self.material.with_method(method)).map_err(|e| GameSceneError {
+                scene: self.name.clone(),
+                reason: e.to_string(),
+            })?;
+        let entity = commands
+            .spawn((
+                body,
+                Transform::from_translation(offset + Vec3::Y * self.lift),
+            ))
+            .id();
+        commands.spawn((
+            StaticCollider::ground(0.8),
+            Transform::from_translation(offset),
+        ));
+        for s in &world.spheres {
+            commands.spawn((
+                RigidSphere {
+                    friction: s.friction,
+                    ..RigidSphere::new(s.radius, 1.0 / s.inv_mass)
+                },
+                Transform::from_translation(offset + s.position),
+            ));
+        }
+        Ok(entity)
+    }
+}
+
+/// Applies `style` to a grid mesh (other meshes are returned as they are).
+fn distort(mesh: TetMesh, style: MeshStyle) -> Result<TetMesh, crate::core::TetMeshError> {
+    let (lo, hi) = mesh.bounds();
+    let size = hi - lo;
+    let positions: Vec<Vec3> = match style {
+        MeshStyle::Grid => return Ok(mesh),
+        MeshStyle::Jittered(amount) => {
+            // The grid's cell, from its shortest edge.
+            let cell = mesh
+                .edges()
+                .iter()
+                .map(|&[i, j]| mesh.positions()[i as usize].distance(mesh.positions()[j as usize]))
+                .fold(f32::INFINITY, f32::min);
+            let mut seed = 0x9e37_79b9_7f4a_7c15u64;
+            let mut next = move || {
+                seed ^= seed << 13;
+                seed ^= seed >> 7;
+                seed ^= seed << 17;
+                (seed >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
+            };
+            let on_face = |p: f32, lo: f32, hi: f32| {
+                (p - lo).abs() < 1e-4 * (hi - lo) || (p - hi).abs() < 1e-4 * (hi - lo)
+            };
+            mesh.positions()
+                .iter()
+                .map(|&p| {
+                    let offset = Vec3::new(next(), next(), next()) * (amount * cell);
+                    Vec3::new(
+                        if on_face(p.x, lo.x, hi.x) {
+                            p.x
+                        } else {
+                            p.x + offset.x
+                        },
+                        if on_face(p.y, lo.y, hi.y) {
+                            p.y
+                        } else {
+                            p.y + offset.y
+                        },
+                        if on_face(p.z, lo.z, hi.z) {
+                            p.z
+                        } else {
+                            p.z + offset.z
+                        },
+                    )
+                })
+                .collect()
+        }
+        MeshStyle::Graded(ratio) => {
+            // u in [0, 1] -> ((1 + a)^u - 1) / a: cell widths grow by `ratio` end to end.
+            let a = ratio - 1.0;
+            let grade = |u: f32| ((1.0 + a).powf(u) - 1.0) / a;
+            mesh.positions()
+                .iter()
+                .map(|&p| {
+                    let u = (p - lo) / size;
+                    lo + Vec3::new(grade(u.x), grade(u.y), grade(u.z)) * size
+                })
+                .collect()
+        }
+    };
+    TetMesh::new(positions, mesh.tets().to_vec())
+}
+
+/// A scene on the simulation core: one body, the ground, any rigid spheres.
+pub struct GameWorld {
+    /// The body.
+    pub body: SoftBodyState,
+    /// The rigid spheres.
+    pub spheres: Vec<RigidSphereState>,
+    /// The ground.
+    pub colliders: Vec<ColliderInstance>,
+    /// Gravity.
+    pub gravity: Vec3,
+    /// The body's rest height, m.
+    pub rest_height: f32,
+}
+
+impl GameWorld {
+    /// One step of `h` seconds, as the plugin runs it for one body.
+    pub fn step(&mut self, h: f32) {
+        self.body
+            .step_with_contacts(h, self.gravity, &mut self.spheres, &self.colliders);
+    }
+
+    /// The body's height (top minus bottom) over its rest height.
+    pub fn height_ratio(&self) -> f32 {
+        let (lo, hi) = self
+            .body
+            .positions()
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.y), hi.max(p.y))
+            });
+        (hi - lo) / self.rest_height
+    }
+}
+
+/// What one run of a scene measured.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct GameRun {
+    /// Largest absolute total volume error, percent.
+    pub peak_volume_error_pct: f64,
+    /// Total volume error at the end, percent (signed).
+    pub final_volume_error_pct: f64,
+    /// Mean absolute per-tet error at the end, percent.
+    pub final_mean_tet_error_pct: f64,
+    /// Lowest height over rest height.
+    pub lowest_height: f32,
+    /// Height over rest height at the end.
+    pub final_height: f32,
+    /// Most inverted tets in a step.
+    pub max_inverted_tets: usize,
+    /// Whether every position stayed finite.
+    pub finite: bool,
+    /// Steps in which the body ran away and was put back.
+    pub runaways: u32,
+    /// Mean wall-clock time of a step, ms.
+    pub mean_step_ms: f64,
+    /// Tets of the body.
+    pub tets: usize,
+}
+
+impl GameScene {
+    /// Runs the scene with `method` at `hz` steps a second for its duration.
+    pub fn run(&self, method: VolumeMethod, hz: f32) -> Result<GameRun, GameSceneError> {
+        let mut world = self.world(method)?;
+        let h = 1.0 / hz;
+        let steps = (self.duration_secs * hz).round() as usize;
+        let mut run = GameRun {
+            lowest_height: f32::INFINITY,
+            finite: true,
+            tets: world.body.mesh().tet_count(),
+            ..Default::default()
+        };
+        let mut elapsed = std::time::Duration::ZERO;
+        for _ in 0..steps {
+            let start = std::time::Instant::now();
+            world.step(h);
+            elapsed += start.elapsed();
+            let m = world.body.volume_metrics();
+            run.finite &= m.volume.is_finite();
+            run.peak_volume_error_pct = run.peak_volume_error_pct.max(m.volume_error_pct.abs());
+            run.max_inverted_tets = run.max_inverted_tets.max(m.inverted_tets);
+            run.runaways += world.body.runaway().is_some() as u32;
+            run.lowest_height = run.lowest_height.min(world.height_ratio());
+            run.final_volume_error_pct = m.volume_error_pct;
+            run.final_mean_tet_error_pct = m.mean_abs_tet_error_pct;
+        }
+        run.final_height = world.height_ratio();
+        run.mean_step_ms = elapsed.as_secs_f64() * 1e3 / steps.max(1) as f64;
+        Ok(run)
+    }
+}
