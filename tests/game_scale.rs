@@ -1,0 +1,184 @@
+//! Bodies made the way a game makes them: Earth gravity, real sizes, physical materials, steps
+//! of 1/30 to 1/120 s, the crate's own grids and irregular meshes (`game_scenes`).
+
+use std::time::Duration;
+
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_soft_body::core::VolumeMethod;
+use bevy_soft_body::game_scenes::{GameScene, MeshStyle};
+use bevy_soft_body::prelude::*;
+
+const RATES: [f32; 3] = [30.0, 60.0, 120.0];
+
+fn scene(name: &str) -> GameScene {
+    GameScene::standard()
+        .into_iter()
+        .find(|s| s.name == name)
+        .unwrap_or_else(|| panic!("no scene {name}"))
+}
+
+/// Every scene on the crate's own meshes (grids, and the tetrahedralizer's sphere and
+/// creature); the jittered and graded grids are in the ignored test below.
+#[test]
+fn game_scenes_stay_finite_and_never_run_away() {
+    for scene in GameScene::standard()
+        .into_iter()
+        .filter(|s| s.mesh == MeshStyle::Grid)
+    {
+        for hz in RATES {
+            let r = scene.run(VolumeMethod::PAPER_IMPULSES, hz).unwrap();
+            assert!(r.finite, "{} at {hz} Hz: {r:?}", scene.name);
+            assert_eq!(r.runaways, 0, "{} at {hz} Hz: {r:?}", scene.name);
+            assert!(
+                r.max_inverted_tets < r.tets / 20,
+                "{} at {hz} Hz: {r:?}",
+                scene.name
+            );
+        }
+    }
+}
+
+#[test]
+fn resting_and_stacked_bodies_keep_their_volume_under_one_percent() {
+    let resting = GameScene {
+        lift: 0.0,
+        ..scene("jelly_cube_drop")
+    };
+    for scene in [resting, scene("sphere_on_soft_block")] {
+        for hz in RATES {
+            let r = scene.run(VolumeMethod::PAPER_IMPULSES, hz).unwrap();
+            assert!(
+                r.peak_volume_error_pct < 1.0,
+                "{} at {hz} Hz: {r:?}",
+                scene.name
+            );
+        }
+    }
+}
+
+#[test]
+fn stiff_bodies_rest_near_their_height_and_soft_ones_squash_and_recover() {
+    for name in [
+        "flesh_cube_drop",
+        "rubber_cube_drop",
+        "sphere_on_soft_block",
+    ] {
+        for hz in RATES {
+            let r = scene(name).run(VolumeMethod::PAPER_IMPULSES, hz).unwrap();
+            assert!(r.final_height >= 0.95, "{name} at {hz} Hz: {r:?}");
+        }
+    }
+    for hz in RATES {
+        let r = scene("jelly_cube_drop")
+            .run(VolumeMethod::PAPER_IMPULSES, hz)
+            .unwrap();
+        // Squashed to well under its height on landing, then back up most of the way.
+        assert!(r.lowest_height < 0.8, "{hz} Hz: {r:?}");
+        assert!(r.final_height > 0.85, "{hz} Hz: {r:?}");
+    }
+}
+
+/// The target for every scene, irregular meshes included; not met yet (see the
+/// README's game-scale table): run with `--ignored`.
+#[test]
+#[ignore = "open: some drops peak over 1 %, irregular meshes run away (README, game scale)"]
+fn every_game_scene_keeps_its_volume_under_one_percent() {
+    for scene in GameScene::standard() {
+        for hz in RATES {
+            let r = scene.run(VolumeMethod::PAPER_IMPULSES, hz).unwrap();
+            assert!(
+                r.peak_volume_error_pct < 1.0 && r.runaways == 0,
+                "{} at {hz} Hz: {r:?}",
+                scene.name
+            );
+        }
+    }
+}
+
+fn app(hz: f64) -> App {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, SoftBodyPlugin::default()))
+        .insert_resource(Time::<Fixed>::from_hz(hz))
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_secs_f64(
+            1.0 / hz,
+        )));
+    app.update();
+    app
+}
+
+#[test]
+fn the_plugin_steps_a_game_scene_as_the_core_does() {
+    let scene = GameScene {
+        duration_secs: 1.0,
+        ..scene("flesh_cube_drop")
+    };
+    let core = scene.run(VolumeMethod::PAPER_IMPULSES, 60.0).unwrap();
+    let mut app = app(60.0);
+    let body = {
+        let world = app.world_mut();
+        let mut commands = world.commands();
+        let body = scene
+            .spawn(&mut commands, VolumeMethod::PAPER_IMPULSES, Vec3::ZERO)
+            .unwrap();
+        world.flush();
+        body
+    };
+    while app.world().get::<SoftBodyStats>(body).unwrap().steps < 60 {
+        app.update();
+    }
+    let stats = app.world().get::<SoftBodyStats>(body).unwrap();
+    assert_eq!(stats.steps, 60);
+    assert!(
+        (stats.peak_volume_error_pct - core.peak_volume_error_pct).abs() < 1e-3,
+        "plugin {} against core {}",
+        stats.peak_volume_error_pct,
+        core.peak_volume_error_pct
+    );
+    assert_eq!(stats.runaway_resets, 0);
+}
+
+#[test]
+fn a_body_that_runs_away_is_reported_once_and_put_back() {
+    let mut app = app(60.0);
+    let mesh =
+        bevy_soft_body::core::box_grid(UVec3::splat(4), Vec3::splat(0.05), Vec3::ZERO).unwrap();
+    // The paper's explicit springs, far too stiff for a 1/60 s step: they explode.
+    let material = SoftBodyMaterial::paper(1000.0, 1e5, 0.0);
+    let mut soft_body = SoftBody::new(mesh.into(), material).unwrap();
+    soft_body.state_mut().velocities_mut()[0] = Vec3::new(1.0, 0.0, 0.0);
+    let body = app
+        .world_mut()
+        .spawn((soft_body, Transform::from_xyz(0.0, 1.0, 0.0)))
+        .id();
+    app.world_mut()
+        .spawn((StaticCollider::ground(0.5), Transform::default()));
+    let mut reported = Vec::new();
+    for _ in 0..120 {
+        app.update();
+        let messages = app.world().resource::<Messages<SoftBodyError>>();
+        reported.extend(
+            messages
+                .iter_current_update_messages()
+                .filter(|e| matches!(e.kind, SoftBodyErrorKind::Runaway(_)))
+                .cloned(),
+        );
+        let transform = app.world().get::<Transform>(body).unwrap();
+        assert!(
+            transform.translation.length() < 10.0,
+            "the body flew off to {}",
+            transform.translation
+        );
+    }
+    let stats = app.world().get::<SoftBodyStats>(body).unwrap();
+    assert!(stats.runaway_resets >= 1, "{stats:?}");
+    // It explodes again after each reset (on landing); a spell of runaways is reported once
+    // per 100 steps at most, not once a step.
+    assert!(
+        (1..=2).contains(&reported.len()),
+        "{} reports for {} resets",
+        reported.len(),
+        stats.runaway_resets
+    );
+    assert!(reported.iter().all(|e| e.body == body));
+}
