@@ -112,13 +112,14 @@ pub struct GameSceneError {
 }
 
 impl GameScene {
-    /// A scene of `shape` made of the preset `material_name` (see
-    /// [`SoftBodyMaterial::PRESETS`]), dropped from `lift`, for 3 s.
-    pub fn new(name: &str, shape: GameShape, material_name: &'static str, lift: f32) -> Self {
-        let material = SoftBodyMaterial::PRESETS
-            .iter()
-            .find(|(n, _)| *n == material_name)
-            .map_or(SoftBodyMaterial::JELLY, |(_, m)| *m);
+    /// A scene of `shape` made of `material` (a name for tables, and the material: one of
+    /// [`SoftBodyMaterial::PRESETS`] or any other), dropped from `lift`, for 3 s.
+    pub fn new(
+        name: &str,
+        shape: GameShape,
+        (material_name, material): (&'static str, SoftBodyMaterial),
+        lift: f32,
+    ) -> Self {
         GameScene {
             name: name.to_string(),
             shape,
@@ -136,15 +137,25 @@ impl GameScene {
     pub fn standard() -> Vec<GameScene> {
         let cube = |size, cells| GameShape::Cube { size, cells };
         let mut scenes = vec![
-            GameScene::new("jelly_cube_small", cube(0.2, 6), "jelly", 0.3),
-            GameScene::new("jelly_cube_large", cube(2.0, 10), "jelly", 3.0),
+            GameScene::new(
+                "jelly_cube_small",
+                cube(0.2, 6),
+                ("jelly", SoftBodyMaterial::JELLY),
+                0.3,
+            ),
+            GameScene::new(
+                "jelly_cube_large",
+                cube(2.0, 10),
+                ("jelly", SoftBodyMaterial::JELLY),
+                3.0,
+            ),
             GameScene::new(
                 "jelly_sphere",
                 GameShape::Sphere {
                     diameter: 0.6,
                     tets: 2500,
                 },
-                "jelly",
+                ("jelly", SoftBodyMaterial::JELLY),
                 1.0,
             ),
             GameScene::new(
@@ -153,7 +164,7 @@ impl GameScene {
                     diameter: 0.3,
                     tets: 1500,
                 },
-                "rubber",
+                ("rubber", SoftBodyMaterial::RUBBER),
                 2.0,
             ),
             GameScene {
@@ -168,7 +179,7 @@ impl GameScene {
                         size: Vec3::new(1.0, 0.4, 1.0),
                         cell: 0.1,
                     },
-                    "jelly",
+                    ("jelly", SoftBodyMaterial::JELLY),
                     0.0,
                 )
             },
@@ -178,7 +189,7 @@ impl GameScene {
                     height: 1.2,
                     tets: 2500,
                 },
-                "flesh",
+                ("flesh", SoftBodyMaterial::FLESH),
                 1.0,
             ),
             GameScene {
@@ -193,16 +204,16 @@ impl GameScene {
                         size: Vec3::new(1.0, 0.5, 1.0),
                         cell: 0.1,
                     },
-                    "flesh",
+                    ("flesh", SoftBodyMaterial::FLESH),
                     0.0,
                 )
             },
         ];
-        for (material, _) in SoftBodyMaterial::PRESETS {
+        for preset in SoftBodyMaterial::PRESETS {
             scenes.push(GameScene::new(
-                &format!("{material}_cube_drop"),
+                &format!("{}_cube_drop", preset.0),
                 cube(0.5, 8),
-                material,
+                preset,
                 1.0,
             ));
         }
@@ -210,13 +221,16 @@ impl GameScene {
             (MeshStyle::Jittered(0.3), "jittered"),
             (MeshStyle::Graded(10.0), "graded"),
         ] {
-            for material in ["jelly", "hard_rubber"] {
+            for preset in [
+                ("jelly", SoftBodyMaterial::JELLY),
+                ("hard_rubber", SoftBodyMaterial::HARD_RUBBER),
+            ] {
                 scenes.push(GameScene {
                     mesh: style,
                     ..GameScene::new(
-                        &format!("{material}_cube_{label}"),
+                        &format!("{}_cube_{label}", preset.0),
                         cube(0.5, 8),
-                        material,
+                        preset,
                         1.0,
                     )
                 });

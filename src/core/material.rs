@@ -197,6 +197,9 @@ pub struct ElasticSettings {
     /// edge: a fast body (a landing, a throw) gets more substeps, up to
     /// [`ElasticSettings::MAX_SUBSTEPS`], so that an impact is met a fraction of a cell at a
     /// time. Default: 0.1.
+    ///
+    /// `max_substep` and `max_motion` are the paper's method's; [`VolumeMethod::Xpbd`] takes
+    /// the fixed number of substeps of its own settings.
     pub max_motion: f32,
 }
 
