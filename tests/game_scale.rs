@@ -18,13 +18,12 @@ fn scene(name: &str) -> GameScene {
         .unwrap_or_else(|| panic!("no scene {name}"))
 }
 
-/// Every scene on the crate's own meshes (grids, and the tetrahedralizer's sphere and
-/// creature); the jittered and graded grids are in the ignored test below.
+/// Every scene but the graded grids (in the ignored test below).
 #[test]
 fn game_scenes_stay_finite_and_never_run_away() {
     for scene in GameScene::standard()
         .into_iter()
-        .filter(|s| s.mesh == MeshStyle::Grid)
+        .filter(|s| !matches!(s.mesh, MeshStyle::Graded(_)))
     {
         for hz in RATES {
             let r = scene.run(VolumeMethod::PAPER_IMPULSES, hz).unwrap();
@@ -94,6 +93,55 @@ fn every_game_scene_keeps_its_volume_under_one_percent() {
             );
         }
     }
+}
+
+#[test]
+fn a_crushed_body_gets_its_volume_back_without_being_thrown() {
+    // A jelly cube flattened to half its height on the ground (half its volume), at rest.
+    let scene = GameScene {
+        lift: 0.0,
+        ..scene("jelly_cube_drop")
+    };
+    let mut world = scene.world(VolumeMethod::PAPER_IMPULSES).unwrap();
+    world.body.map_positions(|p| Vec3::new(p.x, 0.5 * p.y, p.z));
+    let start = world.body.volume_metrics().volume_error_pct;
+    assert!(start < -49.0, "{start}");
+    let rest_centre = 0.5 * world.rest_height;
+    let mut highest = 0.0f32;
+    for _ in 0..120 {
+        world.step(1.0 / 60.0);
+        highest = highest.max(world.body.centre_of_mass().y);
+    }
+    let end = world.body.volume_metrics();
+    assert!(end.volume_error_pct.abs() < 1.0, "{end:?}");
+    // Restored in place: its centre of mass rises to about its rest height, not far above.
+    assert!(
+        highest < 1.3 * rest_centre,
+        "thrown to {highest} (rest {rest_centre})"
+    );
+}
+
+#[test]
+fn a_physical_body_conserves_momentum_in_free_flight() {
+    let scene = scene("jelly_cube_drop");
+    let mut world = scene.world(VolumeMethod::PAPER_IMPULSES).unwrap();
+    world.colliders.clear();
+    world.gravity = Vec3::ZERO;
+    // Squeezed from two sides while moving: every pass has work, nothing outside acts.
+    let positions = world.body.positions().to_vec();
+    for (p, v) in positions.iter().zip(world.body.velocities_mut()) {
+        *v = Vec3::new(if p.x < 0.25 { 2.0 } else { -1.0 }, 0.5, 0.0);
+    }
+    let momentum = world.body.linear_momentum();
+    for _ in 0..60 {
+        world.step(1.0 / 60.0);
+    }
+    let after = world.body.linear_momentum();
+    assert!(
+        (after - momentum).length() < 1e-3 * momentum.length(),
+        "{momentum} -> {after}"
+    );
+    assert!(world.body.volume_metrics().volume_error_pct.abs() < 1.0);
 }
 
 fn app(hz: f64) -> App {

@@ -148,6 +148,8 @@ pub struct SoftBodyState {
     pub(crate) rest_extent: f32,
     /// The shortest rest edge, for the substeps a fast body needs.
     pub(crate) shortest_edge: f32,
+    /// Velocities before a substep's volume impulses (see `xpbd.rs`).
+    pub(crate) substep_velocities: Vec<Vec3>,
     /// Per vertex, whether its ring was past its tolerance when its impulse last checked it:
     /// a guess of whether it will be again, which decides only how the check is computed,
     /// never its result (see `PassView::ring_impulse`).
@@ -200,6 +202,7 @@ impl SoftBodyState {
             runaway: None,
             sane_centre: None,
             shortest_edge,
+            substep_velocities: vec![Vec3::ZERO; n],
             rest_extent: {
                 let (lo, hi) = mesh.bounds();
                 (hi - lo).length()

@@ -59,7 +59,7 @@ impl ColliderInstance {
 
     /// How far `point` is inside this collider and the outward normal there, if it is inside.
     #[inline]
-    fn penetration(&self, point: Vec3) -> Option<(f32, Vec3)> {
+    pub(crate) fn penetration(&self, point: Vec3) -> Option<(f32, Vec3)> {
         if let Some((normal, offset)) = self.plane {
             let depth = offset - normal.dot(point);
             return (depth > 0.0).then_some((depth, normal));

@@ -194,9 +194,10 @@ pub struct ElasticSettings {
     /// more, in proportion. Default: 1/240 s (four substeps at 60 Hz).
     pub max_substep: f32,
     /// The farthest a particle may move in one substep, as a fraction of the mesh's shortest
-    /// edge: a fast body (a landing, a throw) gets more substeps, up to
+    /// edge, relative to the body's mean motion, or in the world when it is about to meet a
+    /// collider: a body deforming fast or landing gets more substeps, up to
     /// [`ElasticSettings::MAX_SUBSTEPS`], so that an impact is met a fraction of a cell at a
-    /// time. Default: 0.1.
+    /// time; a body falling or flying as a whole does not. Default: 0.03.
     ///
     /// `max_substep` and `max_motion` are the paper's method's; [`VolumeMethod::Xpbd`] takes
     /// the fixed number of substeps of its own settings.
@@ -216,7 +217,7 @@ impl ElasticSettings {
             youngs_modulus,
             damping,
             max_substep: Self::DEFAULT_MAX_SUBSTEP,
-            max_motion: 0.1,
+            max_motion: 0.03,
         }
     }
 
