@@ -5,7 +5,8 @@
 //!
 //! Columns: scene, method, hz, material, tets, peak and final volume error (percent), final
 //! mean per-tet error, lowest and final height over rest height, most inverted tets, whether it
-//! stayed finite, runaways caught, mean step ms (one thread, wall clock).
+//! stayed finite, runaways caught, mean step ms (one thread, wall clock). `volume_error.png`
+//! beside it: each scene's volume error over time, every method, at the first rate.
 
 use std::io::Write;
 use std::path::PathBuf;
@@ -35,10 +36,69 @@ struct Args {
     /// Simulated seconds (default: each scene's own).
     #[arg(long)]
     seconds: Option<f32>,
+    /// Also write each scene's tet mesh (TetGen `.node`/`.ele` under `DIR/meshes`) and
+    /// `DIR/scenes.csv` (its material, placement and sphere), for the rapier peer
+    /// (`peers/rapier`), and run no method.
+    #[arg(long)]
+    export: Option<PathBuf>,
+}
+
+/// Writes the scenes' meshes and `scenes.csv` into `dir` (see `Args::export`).
+fn export(dir: &std::path::Path, scenes: &[GameScene]) -> Result<(), String> {
+    use bevy_soft_body::core::{Elasticity, write_tetgen};
+    let meshes = dir.join("meshes");
+    std::fs::create_dir_all(&meshes).map_err(|e| format!("{}: {e}", meshes.display()))?;
+    let mut csv = String::from(
+        "scene,material,density,youngs_modulus,friction,lift,sphere_radius,sphere_mass,sphere_gap,\
+         duration_secs\n",
+    );
+    for scene in scenes {
+        let mesh = scene.tet_mesh().map_err(|e| e.to_string())?;
+        let (node, ele) = write_tetgen(&mesh);
+        for (ext, text) in [("node", node), ("ele", ele)] {
+            let path = meshes.join(format!("{}.{ext}", scene.name));
+            std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        }
+        let youngs = match scene.material.elasticity {
+            Elasticity::Elastic(e) => e.youngs_modulus,
+            Elasticity::Springs { .. } => 0.0,
+        };
+        let (radius, mass, gap) = scene
+            .sphere
+            .map_or((0.0, 0.0, 0.0), |s| (s.radius, s.mass, s.gap));
+        csv += &format!(
+            "{},{},{},{},{},{},{},{},{},{}\n",
+            scene.name,
+            scene.material_name,
+            scene.material.density,
+            youngs,
+            scene.material.friction,
+            scene.lift,
+            radius,
+            mass,
+            gap,
+            scene.duration_secs
+        );
+    }
+    let path = dir.join("scenes.csv");
+    std::fs::write(&path, csv).map_err(|e| format!("{}: {e}", path.display()))?;
+    println!("wrote {} scenes into {}", scenes.len(), dir.display());
+    Ok(())
 }
 
 fn main() -> Result<(), String> {
     let args = Args::parse();
+    if let Some(dir) = &args.export {
+        let scenes: Vec<GameScene> = GameScene::standard()
+            .into_iter()
+            .filter(|s| {
+                args.only
+                    .as_ref()
+                    .is_none_or(|o| s.name.contains(o.as_str()))
+            })
+            .collect();
+        return export(dir, &scenes);
+    }
     let mut rows = vec![
         "scene,method,hz,material,tets,peak_volume_error_pct,final_volume_error_pct,\
          final_mean_tet_error_pct,lowest_height,final_height,max_inverted_tets,finite,runaways,\
@@ -46,6 +106,8 @@ fn main() -> Result<(), String> {
             .to_string(),
     ];
     println!("{}", rows[0]);
+    // Per scene and method, at the first rate: the volume error over time, for the figure.
+    let mut curves: Vec<Curve> = Vec::new();
     for mut scene in GameScene::standard() {
         if args
             .only
@@ -67,7 +129,18 @@ fn main() -> Result<(), String> {
                 other => return Err(format!("--methods: unknown method `{other}`")),
             };
             for &hz in &args.hz {
-                let r = scene.run(method, hz).map_err(|e| e.to_string())?;
+                let mut series = Vec::new();
+                let r = scene
+                    .run_recording(method, hz, |t, e| series.push((t, e)))
+                    .map_err(|e| e.to_string())?;
+                if hz == args.hz[0] {
+                    curves.push((
+                        scene.name.clone(),
+                        name.clone(),
+                        r.peak_volume_error_pct,
+                        series,
+                    ));
+                }
                 let row = format!(
                     "{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{:.4}",
                     scene.name,
@@ -99,6 +172,85 @@ fn main() -> Result<(), String> {
             writeln!(file, "{row}").map_err(|e| format!("{}: {e}", path.display()))?;
         }
         println!("wrote {}", path.display());
+        let figure = out.join("volume_error.png");
+        plot(&figure, &curves, args.hz[0]).map_err(|e| format!("{}: {e}", figure.display()))?;
+        println!("wrote {}", figure.display());
     }
+    Ok(())
+}
+
+/// A scene's name, a method's, its peak, and its volume error over time.
+type Curve = (String, String, f64, Vec<(f32, f64)>);
+
+/// The volume error in % over time, every method, one panel per scene (as `paper_figures`'
+/// Figure 2), at `hz`.
+fn plot(
+    path: &std::path::Path,
+    curves: &[Curve],
+    hz: f32,
+) -> Result<(), Box<dyn std::error::Error>> {
+    use plotters::prelude::*;
+    plotters::style::register_font(
+        "sans-serif",
+        FontStyle::Normal,
+        epaint_default_fonts::UBUNTU_LIGHT,
+    )
+    .map_err(|_| "the built-in font is not a valid font")?;
+    let mut scenes: Vec<&str> = Vec::new();
+    for (scene, ..) in curves {
+        if !scenes.contains(&scene.as_str()) {
+            scenes.push(scene);
+        }
+    }
+    let root =
+        BitMapBackend::new(path, (1400, 240 * scenes.len().max(1) as u32)).into_drawing_area();
+    root.fill(&WHITE)?;
+    let panels = root.split_evenly((scenes.len().max(1), 1));
+    for (scene, panel) in scenes.iter().zip(panels) {
+        let mine: Vec<&Curve> = curves.iter().filter(|c| c.0 == *scene).collect();
+        let t_max = mine
+            .iter()
+            .filter_map(|c| c.3.last().map(|p| p.0))
+            .fold(1.0f32, f32::max);
+        // Clipped to +-5 %: a method that runs away would hide the others.
+        let values = || {
+            mine.iter()
+                .flat_map(|c| c.3.iter().map(|p| p.1.clamp(-5.0, 5.0)))
+        };
+        let lo = values().fold(-1.0f64, f64::min);
+        let hi = values().fold(1.0f64, f64::max);
+        let pad = 0.05 * (hi - lo);
+        let mut chart = ChartBuilder::on(&panel)
+            .caption(format!("{scene} ({hz} Hz, g = 9.81)"), ("sans-serif", 20))
+            .margin(10)
+            .x_label_area_size(32)
+            .y_label_area_size(60)
+            .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))?;
+        chart
+            .configure_mesh()
+            .x_desc("time (s)")
+            .y_desc("volume error (%)")
+            .label_style(("sans-serif", 14))
+            .draw()?;
+        for (c, colour) in mine.iter().zip([RED, BLUE, RGBColor(20, 150, 60)]) {
+            chart
+                .draw_series(LineSeries::new(
+                    c.3.iter().map(|p| (p.0, p.1.clamp(-5.0, 5.0))),
+                    colour.stroke_width(2),
+                ))?
+                .label(format!("{} (peak {:.2} %)", c.1, c.2))
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                });
+        }
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::LowerRight)
+            .background_style(WHITE.mix(0.8))
+            .border_style(BLACK)
+            .label_font(("sans-serif", 15))
+            .draw()?;
+    }
+    root.present()?;
     Ok(())
 }

@@ -479,6 +479,17 @@ pub struct GameRun {
 impl GameScene {
     /// Runs the scene with `method` at `hz` steps a second for its duration.
     pub fn run(&self, method: VolumeMethod, hz: f32) -> Result<GameRun, GameSceneError> {
+        self.run_recording(method, hz, |_, _| {})
+    }
+
+    /// [`GameScene::run`], handing `record` the time and the total volume error (percent) after
+    /// every step.
+    pub fn run_recording(
+        &self,
+        method: VolumeMethod,
+        hz: f32,
+        mut record: impl FnMut(f32, f64),
+    ) -> Result<GameRun, GameSceneError> {
         let mut world = self.world(method)?;
         let h = 1.0 / hz;
         let steps = (self.duration_secs * hz).round() as usize;
@@ -489,11 +500,12 @@ impl GameScene {
             ..Default::default()
         };
         let mut elapsed = std::time::Duration::ZERO;
-        for _ in 0..steps {
+        for step in 0..steps {
             let start = std::time::Instant::now();
             world.step(h);
             elapsed += start.elapsed();
             let m = world.body.volume_metrics();
+            record((step + 1) as f32 * h, m.volume_error_pct);
             run.finite &= m.volume.is_finite();
             run.peak_volume_error_pct = run.peak_volume_error_pct.max(m.volume_error_pct.abs());
             run.max_inverted_tets = run.max_inverted_tets.max(m.inverted_tets);
