@@ -6,8 +6,10 @@
 //! paper scenes with the three methods (`baseline`, `paper`, `xpbd` with 10 substeps unless
 //! `--xpbd-substeps N`) over their whole duration, boxes of 1 000 to 200 000 tets
 //! settling on the ground (100 steps; the small ones again from the start, 18 and 2 times),
-//! and 16 bodies of 1080 tets dropped side by side on the ground. `mean_step_ms` is the
-//! wall-clock time of the plugin's stages per 10 ms step, all bodies together
+//! and 16 bodies of 1080 tets dropped side by side on the ground; then, at 60 Hz and Earth
+//! gravity, every game scene (`game_scenes`) and 16 jelly cubes of 2 560 tets (`jellies_16`),
+//! with the paper's method and XPBD. `mean_step_ms` is the
+//! wall-clock time of the plugin's stages per step, all bodies together
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
 //! between the stages is not in it. A scene's three methods run side by side, in turns of 50
 //! steps, so that their ratios come from the same minutes of the machine. `--threads N` sizes
@@ -34,6 +36,7 @@ use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
 use bevy::prelude::*;
 use bevy_soft_body::SoftBodyStepTime;
 use bevy_soft_body::core::{ImpulseSettings, VolumeMethod, XpbdSettings, box_grid};
+use bevy_soft_body::game_scenes::GameScene;
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
 
@@ -105,8 +108,9 @@ fn parse_args() -> Result<Args, String> {
 
 /// A headless app with `pool` threads in Bevy's compute task pool (where the systems and the
 /// bodies run; the IO and async pools get one each besides; the pools are one per process, so
-/// the first app sets them), stepping 10 ms per update, its steps held to `threads` of them.
-fn app(pool: usize, threads: usize, keep_awake: bool) -> App {
+/// the first app sets them), stepping `1 / hz` s per update (the paper's scenes 100 Hz, the
+/// game scenes 60), its steps held to `threads` of them.
+fn app(pool: usize, threads: usize, keep_awake: bool, hz: f64) -> App {
     let mut options = TaskPoolOptions::with_num_threads(pool + 2);
     options.compute.min_threads = pool;
     options.compute.max_threads = pool;
@@ -119,8 +123,9 @@ fn app(pool: usize, threads: usize, keep_awake: bool) -> App {
         PaperScenesPlugin,
     ))
     .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
-        Duration::from_millis(10),
+        Duration::from_secs_f64(1.0 / hz),
     ))
+    .insert_resource(Time::<Fixed>::from_hz(hz))
     .insert_resource(SoftBodyThreads {
         keep_awake,
         max_threads: threads,
@@ -178,7 +183,7 @@ fn bench(
     args: &Args,
     name: &str,
     methods: &[VolumeMethod],
-    (steps, repeats): (u32, u32),
+    (steps, repeats, hz): (u32, u32, f64),
     spawn: impl Fn(&mut World, VolumeMethod),
 ) {
     let pool = args.threads.iter().copied().max().unwrap_or(1);
@@ -192,7 +197,7 @@ fn bench(
         let mut apps: Vec<App> = runs
             .iter()
             .map(|&(threads, method)| {
-                let mut app = app(pool, threads, args.keep_awake);
+                let mut app = app(pool, threads, args.keep_awake, hz);
                 spawn(app.world_mut(), method);
                 app.world_mut().flush();
                 app
@@ -258,7 +263,7 @@ fn main() {
             &args,
             scene.name(),
             &methods,
-            (steps, 1),
+            (steps, 1, 100.0),
             |world, method| {
                 scene.spawn(&mut world.commands(), method, Vec3::ZERO);
             },
@@ -285,15 +290,21 @@ fn main() {
             .expect("a valid grid")
             .into();
         let repeats = (20_000 / (5 * cells.element_product())).clamp(1, 20);
-        bench(&args, name, &methods, (100, repeats), |world, method| {
-            let material = PaperScene::Creature.material(method);
-            world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
-            world.spawn((
-                SoftBody::new(mesh.clone(), material).expect("a valid material"),
-                Transform::from_xyz(0.0, 0.05, 0.0),
-            ));
-            world.spawn((StaticCollider::ground(0.8), Transform::default()));
-        });
+        bench(
+            &args,
+            name,
+            &methods,
+            (100, repeats, 100.0),
+            |world, method| {
+                let material = PaperScene::Creature.material(method);
+                world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
+                world.spawn((
+                    SoftBody::new(mesh.clone(), material).expect("a valid material"),
+                    Transform::from_xyz(0.0, 0.05, 0.0),
+                ));
+                world.spawn((StaticCollider::ground(0.8), Transform::default()));
+            },
+        );
     }
 
     // Many bodies: 16 cubes of 6^3 cells side by side (bodies do not collide with each other).
@@ -301,17 +312,78 @@ fn main() {
         let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(6), Vec3::splat(0.1), Vec3::ZERO)
             .expect("a valid grid")
             .into();
-        bench(&args, "bodies_16", &methods, (300, 1), |world, method| {
-            let material = PaperScene::Creature.material(method);
-            world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
-            for k in 0..16 {
-                let (i, j) = (k % 4, k / 4);
-                world.spawn((
-                    SoftBody::new(mesh.clone(), material).expect("a valid material"),
-                    Transform::from_xyz(i as f32 * 0.75, 0.2 + 0.05 * k as f32, j as f32 * 0.75),
-                ));
-            }
-            world.spawn((StaticCollider::ground(0.8), Transform::default()));
-        });
+        bench(
+            &args,
+            "bodies_16",
+            &methods,
+            (300, 1, 100.0),
+            |world, method| {
+                let material = PaperScene::Creature.material(method);
+                world.insert_resource(SoftBodyGravity(PaperScene::Creature.gravity()));
+                for k in 0..16 {
+                    let (i, j) = (k % 4, k / 4);
+                    world.spawn((
+                        SoftBody::new(mesh.clone(), material).expect("a valid material"),
+                        Transform::from_xyz(
+                            i as f32 * 0.75,
+                            0.2 + 0.05 * k as f32,
+                            j as f32 * 0.75,
+                        ),
+                    ));
+                }
+                world.spawn((StaticCollider::ground(0.8), Transform::default()));
+            },
+        );
+    }
+
+    // Game scale at 60 Hz (`bevy_soft_body::game_scenes`, Earth gravity, physical materials):
+    // every game scene, and 16 jelly cubes of 2 560 tets dropped side by side from 0.3 m, for
+    // the paper's method and XPBD (the explicit baseline cannot hold a physical material).
+    let game_methods: Vec<VolumeMethod> = methods
+        .iter()
+        .copied()
+        .filter(|m| !matches!(m, VolumeMethod::Baseline { .. }))
+        .collect();
+    for scene in GameScene::standard() {
+        if !wanted(&scene.name) {
+            continue;
+        }
+        let steps = (scene.duration_secs * 60.0).round() as u32;
+        bench(
+            &args,
+            &scene.name,
+            &game_methods,
+            (steps, 1, 60.0),
+            |world, method| {
+                scene
+                    .spawn(&mut world.commands(), method, Vec3::ZERO)
+                    .expect("the standard scenes build");
+            },
+        );
+    }
+    if wanted("jellies_16") {
+        let jelly = GameScene {
+            lift: 0.3,
+            ..GameScene::standard()
+                .into_iter()
+                .find(|s| s.name == "jelly_cube_drop")
+                .expect("a standard scene")
+        };
+        bench(
+            &args,
+            "jellies_16",
+            &game_methods,
+            (180, 1, 60.0),
+            |world, method| {
+                for k in 0..16 {
+                    let (i, j) = (k % 4, k / 4);
+                    let offset = Vec3::new(i as f32 * 0.8, 0.02 * k as f32, j as f32 * 0.8);
+                    jelly
+                        .spawn_body(&mut world.commands(), method, offset)
+                        .expect("a standard scene");
+                }
+                world.spawn((StaticCollider::ground(0.8), Transform::default()));
+            },
+        );
     }
 }

@@ -324,6 +324,21 @@ impl GameScene {
         method: VolumeMethod,
         offset: Vec3,
     ) -> Result<Entity, GameSceneError> {
+        let body = self.spawn_body(commands, method, offset)?;
+        commands.spawn((
+            StaticCollider::ground(0.8),
+            Transform::from_translation(offset),
+        ));
+        Ok(body)
+    }
+
+    /// [`GameScene::spawn`] without the ground (for several scenes on one ground).
+    pub fn spawn_body(
+        &self,
+        commands: &mut Commands,
+        method: VolumeMethod,
+        offset: Vec3,
+    ) -> Result<Entity, GameSceneError> {
         let world = self.world(method)?;
         let mesh = world.body.mesh().clone();
         let body =
@@ -337,10 +352,6 @@ impl GameScene {
                 Transform::from_translation(offset + Vec3::Y * self.lift),
             ))
             .id();
-        commands.spawn((
-            StaticCollider::ground(0.8),
-            Transform::from_translation(offset),
-        ));
         for s in &world.spheres {
             commands.spawn((
                 RigidSphere {
