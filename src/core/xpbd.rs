@@ -183,10 +183,9 @@ impl SoftBodyState {
     /// `[0, 1]` that adds no kinetic energy. An impulse that stops a compression (it takes
     /// away the velocity that compresses the tets) keeps all of it (`k` = 1 while
     /// `sum m v.dv <= -1/2 sum m |dv|^2`); what only restores drifted volume, a tet crushed by
-    /// a landing or a tet inverted, moves the particles back without launching them. Without
-    /// it a 2 m jelly cube landing from 3 m left 4 % of its volume in 45 inverted tets, whose
-    /// restoration threw it 7 m up. One scale for the whole body, so momentum is conserved
-    /// (the impulses' `sum m dv` is zero, and so is `k` times it).
+    /// a landing or a tet inverted, moves the particles back without launching them (the
+    /// measurements are in PERFORMANCE.md, "Issue 24"). One scale for the whole body, so
+    /// momentum is conserved (the impulses' `sum m dv` is zero, and so is `k` times it).
     fn volume_impulses_in_substep(
         &mut self,
         hs: f32,
