@@ -41,6 +41,50 @@ struct Args {
     /// (`peers/rapier`), and run no method.
     #[arg(long)]
     export: Option<PathBuf>,
+    /// Also find, per scene at the first rate, the fewest XPBD substeps (of 1, 2, 3, 4, 6, 8,
+    /// 12, 16, 24, 32, 48, 64) whose peak volume error is at or under the paper's method's with
+    /// no runaway, and compare their step times (`xpbd_match.csv` in `--out`).
+    #[arg(long)]
+    xpbd_match: bool,
+}
+
+/// The XPBD substeps `--xpbd-match` tries, in order.
+const MATCH_SUBSTEPS: [u32; 12] = [1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64];
+
+/// `--xpbd-match` for one scene at `hz`: the paper's run, then XPBD with more and more
+/// substeps until it is as accurate; one CSV row.
+fn xpbd_match(scene: &GameScene, hz: f32) -> Result<String, String> {
+    let paper = scene
+        .run(VolumeMethod::PAPER_IMPULSES, hz)
+        .map_err(|e| e.to_string())?;
+    for substeps in MATCH_SUBSTEPS {
+        let xpbd = scene
+            .run(VolumeMethod::Xpbd(XpbdSettings { substeps }), hz)
+            .map_err(|e| e.to_string())?;
+        if xpbd.runaways == 0 && xpbd.peak_volume_error_pct <= paper.peak_volume_error_pct {
+            let ratio = paper.mean_step_ms / xpbd.mean_step_ms;
+            // Runs one after another differ by more than 5 % here: closer is a tie.
+            let verdict = if ratio < 0.95 {
+                "paper faster"
+            } else if ratio > 1.05 {
+                "xpbd faster"
+            } else {
+                "tie"
+            };
+            return Ok(format!(
+                "{},{hz},{:.4},{:.4},{substeps},{:.4},{:.4},{ratio:.3},{verdict}",
+                scene.name,
+                paper.peak_volume_error_pct,
+                paper.mean_step_ms,
+                xpbd.peak_volume_error_pct,
+                xpbd.mean_step_ms
+            ));
+        }
+    }
+    Ok(format!(
+        "{},{hz},{:.4},{:.4},,,,,xpbd never as accurate (64 substeps)",
+        scene.name, paper.peak_volume_error_pct, paper.mean_step_ms
+    ))
 }
 
 /// Writes the scenes' meshes and `scenes.csv` into `dir` (see `Args::export`).
@@ -163,7 +207,32 @@ fn main() -> Result<(), String> {
             }
         }
     }
+    let mut matches = vec![
+        "scene,hz,paper_peak_pct,paper_ms,xpbd_substeps,xpbd_peak_pct,xpbd_ms,paper_over_xpbd,verdict"
+            .to_string(),
+    ];
+    if args.xpbd_match {
+        println!("{}", matches[0]);
+        for scene in GameScene::standard() {
+            if args
+                .only
+                .as_ref()
+                .is_some_and(|o| !scene.name.contains(o.as_str()))
+            {
+                continue;
+            }
+            let row = xpbd_match(&scene, args.hz[0])?;
+            println!("{row}");
+            matches.push(row);
+        }
+    }
     if let Some(out) = args.out {
+        if args.xpbd_match {
+            let path = out.join("xpbd_match.csv");
+            std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
+            std::fs::write(&path, matches.join("\n") + "\n")
+                .map_err(|e| format!("{}: {e}", path.display()))?;
+        }
         std::fs::create_dir_all(&out).map_err(|e| format!("{}: {e}", out.display()))?;
         let path = out.join("summary.csv");
         let mut file =
