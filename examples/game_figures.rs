@@ -15,6 +15,8 @@ use bevy_soft_body::core::{VolumeMethod, XpbdSettings};
 use bevy_soft_body::game_scenes::GameScene;
 use clap::Parser;
 
+mod figures;
+
 #[derive(Parser)]
 #[command(about = "Game-scale scenes for every method and step rate")]
 struct Args {
@@ -259,12 +261,7 @@ fn plot(
     hz: f32,
 ) -> Result<(), Box<dyn std::error::Error>> {
     use plotters::prelude::*;
-    plotters::style::register_font(
-        "sans-serif",
-        FontStyle::Normal,
-        epaint_default_fonts::UBUNTU_LIGHT,
-    )
-    .map_err(|_| "the built-in font is not a valid font")?;
+    figures::register_font()?;
     let mut scenes: Vec<&str> = Vec::new();
     for (scene, ..) in curves {
         if !scenes.contains(&scene.as_str()) {
@@ -275,50 +272,37 @@ fn plot(
         BitMapBackend::new(path, (1400, 240 * scenes.len().max(1) as u32)).into_drawing_area();
     root.fill(&WHITE)?;
     let panels = root.split_evenly((scenes.len().max(1), 1));
+    // Clipped to +-5 %: a method that runs away would hide the others.
+    fn clipped(c: &Curve) -> impl Iterator<Item = (f64, f64)> + '_ {
+        c.3.iter().map(|p| (p.0 as f64, p.1.clamp(-5.0, 5.0)))
+    }
     for (scene, panel) in scenes.iter().zip(panels) {
         let mine: Vec<&Curve> = curves.iter().filter(|c| c.0 == *scene).collect();
         let t_max = mine
             .iter()
-            .filter_map(|c| c.3.last().map(|p| p.0))
-            .fold(1.0f32, f32::max);
-        // Clipped to +-5 %: a method that runs away would hide the others.
-        let values = || {
-            mine.iter()
-                .flat_map(|c| c.3.iter().map(|p| p.1.clamp(-5.0, 5.0)))
-        };
-        let lo = values().fold(-1.0f64, f64::min);
-        let hi = values().fold(1.0f64, f64::max);
-        let pad = 0.05 * (hi - lo);
-        let mut chart = ChartBuilder::on(&panel)
-            .caption(format!("{scene} ({hz} Hz, g = 9.81)"), ("sans-serif", 20))
-            .margin(10)
-            .x_label_area_size(32)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))?;
-        chart
-            .configure_mesh()
-            .x_desc("time (s)")
-            .y_desc("volume error (%)")
-            .label_style(("sans-serif", 14))
-            .draw()?;
-        for (c, colour) in mine.iter().zip([RED, BLUE, RGBColor(20, 150, 60)]) {
-            chart
-                .draw_series(LineSeries::new(
-                    c.3.iter().map(|p| (p.0, p.1.clamp(-5.0, 5.0))),
-                    colour.stroke_width(2),
-                ))?
-                .label(format!("{} (peak {:.2} %)", c.1, c.2))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerRight)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 15))
-            .draw()?;
+            .filter_map(|c| c.3.last().map(|p| p.0 as f64))
+            .fold(1.0, f64::max);
+        let values = || mine.iter().flat_map(|c| clipped(c).map(|p| p.1));
+        let range = (
+            values().fold(-1.0f64, f64::min),
+            values().fold(1.0f64, f64::max),
+        );
+        let mut points: Vec<_> = mine.iter().map(|c| clipped(c)).collect();
+        let panel_curves = mine
+            .iter()
+            .zip(points.iter_mut())
+            .map(|(c, points)| figures::Curve {
+                label: format!("{} (peak {:.2} %)", c.1, c.2),
+                points,
+            })
+            .collect();
+        figures::volume_panel(
+            &panel,
+            &format!("{scene} ({hz} Hz, g = 9.81)"),
+            t_max,
+            range,
+            panel_curves,
+        )?;
     }
     root.present()?;
     Ok(())

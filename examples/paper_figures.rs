@@ -16,6 +16,7 @@
 //! from runs one after another; on a machine whose speed moves between minutes, time the
 //! substeps it finds side by side with `bench --only NAME --xpbd-substeps N`.
 
+mod figures;
 mod measure_args;
 
 use measure_args::{fraction, substeps};
@@ -349,12 +350,7 @@ fn plot(
     path: &std::path::Path,
     all: &[(PaperScene, Vec<Run>)],
 ) -> Result<(), Box<dyn std::error::Error>> {
-    plotters::style::register_font(
-        "sans-serif",
-        FontStyle::Normal,
-        epaint_default_fonts::UBUNTU_LIGHT,
-    )
-    .map_err(|_| "the built-in font is not a valid font")?;
+    figures::register_font()?;
     let root = BitMapBackend::new(path, (1400, 300 * all.len().max(1) as u32)).into_drawing_area();
     root.fill(&WHITE)?;
     let panels = root.split_evenly((all.len().max(1), 1));
@@ -368,40 +364,25 @@ fn plot(
             .iter()
             .flat_map(|r| r.error.iter().copied())
             .fold(1.0f64, f64::max);
-        let pad = 0.05 * (hi - lo);
-        let mut chart = ChartBuilder::on(&panel)
-            .caption(
-                format!("{} (k_D = {})", scene.name(), scene.distance_stiffness()),
-                ("sans-serif", 22),
-            )
-            .margin(12)
-            .x_label_area_size(36)
-            .y_label_area_size(60)
-            .build_cartesian_2d(0.0..t_max, (lo - pad)..(hi + pad))?;
-        chart
-            .configure_mesh()
-            .x_desc("time (s)")
-            .y_desc("volume error (%)")
-            .label_style(("sans-serif", 15))
-            .draw()?;
-        for (r, colour) in runs.iter().zip([RED, BLUE, RGBColor(20, 150, 60)]) {
-            chart
-                .draw_series(LineSeries::new(
-                    r.times.iter().copied().zip(r.error.iter().copied()),
-                    colour.stroke_width(2),
-                ))?
-                .label(format!("{} (peak {:.2} %)", r.method, r.peak))
-                .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-                });
-        }
-        chart
-            .configure_series_labels()
-            .position(SeriesLabelPosition::LowerLeft)
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 16))
-            .draw()?;
+        let mut points: Vec<_> = runs
+            .iter()
+            .map(|r| r.times.iter().copied().zip(r.error.iter().copied()))
+            .collect();
+        let curves = runs
+            .iter()
+            .zip(points.iter_mut())
+            .map(|(r, points)| figures::Curve {
+                label: format!("{} (peak {:.2} %)", r.method, r.peak),
+                points,
+            })
+            .collect();
+        figures::volume_panel(
+            &panel,
+            &format!("{} (k_D = {})", scene.name(), scene.distance_stiffness()),
+            t_max,
+            (lo, hi),
+            curves,
+        )?;
     }
     root.present()?;
     Ok(())

@@ -241,10 +241,7 @@ impl GameScene {
 
     /// The body's tet mesh in its own frame, its lowest point at y = 0, centred in x and z.
     pub fn tet_mesh(&self) -> Result<TetMesh, GameSceneError> {
-        let error = |reason: String| GameSceneError {
-            scene: self.name.clone(),
-            reason,
-        };
+        let error = |reason: String| self.error(reason);
         let mesh = match self.shape {
             GameShape::Cube { size, cells } => box_grid(
                 UVec3::splat(cells),
@@ -288,32 +285,40 @@ impl GameScene {
     /// The scene on the simulation core, with the body's material under `method`.
     pub fn world(&self, method: VolumeMethod) -> Result<GameWorld, GameSceneError> {
         let mesh = Arc::new(self.tet_mesh()?);
-        let material = self.material.with_method(method);
-        let mut body = SoftBodyState::new(mesh.clone(), material).map_err(|e| GameSceneError {
-            scene: self.name.clone(),
-            reason: e.to_string(),
-        })?;
+        let mut body = SoftBodyState::new(mesh.clone(), self.material.with_method(method))
+            .map_err(|e| self.error(e.to_string()))?;
         body.translate(Vec3::Y * self.lift);
-        let (_, hi) = mesh.bounds();
-        let spheres = self
-            .sphere
+        let ground = ColliderInstance::new(SharedShape::halfspace(Vec3::Y), Pose::IDENTITY, 0.8);
+        Ok(GameWorld {
+            rest_height: mesh.bounds().1.y,
+            spheres: self.spheres(&mesh),
+            body,
+            colliders: vec![ground],
+            gravity: Vec3::new(0.0, -EARTH_GRAVITY, 0.0),
+        })
+    }
+
+    /// The scene's rigid spheres, above `mesh` (the body's rest shape) lifted by `lift`.
+    fn spheres(&self, mesh: &TetMesh) -> Vec<RigidSphereState> {
+        let top = self.lift + mesh.bounds().1.y;
+        self.sphere
             .iter()
             .map(|s| RigidSphereState {
-                position: Vec3::new(0.0, self.lift + hi.y + s.gap + s.radius, 0.0),
+                position: Vec3::new(0.0, top + s.gap + s.radius, 0.0),
                 velocity: Vec3::ZERO,
                 radius: s.radius,
                 inv_mass: 1.0 / s.mass,
                 friction: 0.5,
             })
-            .collect();
-        let ground = ColliderInstance::new(SharedShape::halfspace(Vec3::Y), Pose::IDENTITY, 0.8);
-        Ok(GameWorld {
-            rest_height: hi.y,
-            body,
-            spheres,
-            colliders: vec![ground],
-            gravity: Vec3::new(0.0, -EARTH_GRAVITY, 0.0),
-        })
+            .collect()
+    }
+
+    /// An error about this scene.
+    fn error(&self, reason: String) -> GameSceneError {
+        GameSceneError {
+            scene: self.name.clone(),
+            reason,
+        }
     }
 
     /// Spawns the scene in a Bevy app (the body, a ground, the sphere), with the body's material
@@ -339,20 +344,17 @@ impl GameScene {
         method: VolumeMethod,
         offset: Vec3,
     ) -> Result<Entity, GameSceneError> {
-        let world = self.world(method)?;
-        let mesh = world.body.mesh().clone();
-        let body =
-            SoftBody::new(mesh, self.material.with_method(method)).map_err(|e| GameSceneError {
-                scene: self.name.clone(),
-                reason: e.to_string(),
-            })?;
+        let mesh = Arc::new(self.tet_mesh()?);
+        let spheres = self.spheres(&mesh);
+        let body = SoftBody::new(mesh, self.material.with_method(method))
+            .map_err(|e| self.error(e.to_string()))?;
         let entity = commands
             .spawn((
                 body,
                 Transform::from_translation(offset + Vec3::Y * self.lift),
             ))
             .id();
-        for s in &world.spheres {
+        for s in &spheres {
             commands.spawn((
                 RigidSphere {
                     friction: s.friction,

@@ -174,9 +174,9 @@ pub enum Elasticity {
 /// equally, that is the strain energy of an isotropic solid of Young's modulus `E` (and
 /// Poisson's ratio 1/4, what a network of edges has; the volume method then makes it almost
 /// incompressible). The edges are solved as XPBD constraints of compliance `1 / k_e`
-/// (Macklin et al. 2016) in substeps of at most `max_substep` seconds, each with gravity and
-/// contacts (the "Small Steps" scheme, Macklin et al. 2019); a step's volume impulses act
-/// once on what the substeps predict. Too stiff for the substep, an edge becomes as stiff as
+/// (Macklin et al. 2016) in substeps of at most `max_substep` seconds, each with gravity,
+/// contacts and the paper's volume impulses (the "Small Steps" scheme, Macklin et al. 2019;
+/// see `SoftBodyState::shape_pass`). Too stiff for the substep, an edge becomes as stiff as
 /// the substep allows (a rigid rod at most): it never explodes.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ElasticSettings {
