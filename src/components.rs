@@ -195,6 +195,9 @@ pub struct SoftBodyStats {
     pub runaway_resets: u32,
     /// The step of the last runaway, if any.
     pub last_runaway_step: Option<u64>,
+    /// Whether the body is asleep (at rest, not stepped until disturbed; see
+    /// `SoftBodyState::is_sleeping`).
+    pub sleeping: bool,
 }
 
 impl SoftBodyStats {

@@ -877,15 +877,21 @@ fn writeback(
         if !body.placed {
             return;
         }
+        stats.step_ms = body.step_time.as_secs_f64() * 1e3;
+        stats.total_step_ms += stats.step_ms;
+        stats.counters = body.state.counters();
+        // A body that slept through the step has not moved since its metrics were taken.
+        let slept = stats.sleeping && body.state.is_sleeping();
+        stats.sleeping = body.state.is_sleeping();
+        if slept {
+            return;
+        }
         let m = body.state.volume_metrics();
         stats.volume_error_pct = m.volume_error_pct;
         stats.peak_volume_error_pct = stats.peak_volume_error_pct.max(m.volume_error_pct.abs());
         stats.mean_abs_tet_error_pct = m.mean_abs_tet_error_pct;
         stats.inverted_tets = m.inverted_tets;
         stats.max_inverted_tets = stats.max_inverted_tets.max(m.inverted_tets);
-        stats.step_ms = body.step_time.as_secs_f64() * 1e3;
-        stats.total_step_ms += stats.step_ms;
-        stats.counters = body.state.counters();
         transform.translation = body.state.centre_of_mass();
     };
     // A single body on this thread, as in the stages (`for_each_body`): a parallel query hands

@@ -281,6 +281,8 @@ impl PaperScene {
         let mesh = self.tet_mesh();
         let mut body =
             SoftBody::new(mesh.clone(), self.material(method)).expect("scene materials are valid");
+        // The paper's scenes run as published, without sleeping (XPBD would sleep otherwise).
+        body.state_mut().set_sleep_settings(None);
         for v in body.state_mut().velocities_mut() {
             v.y = -params.speed;
         }

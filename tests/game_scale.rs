@@ -230,3 +230,68 @@ fn a_body_that_runs_away_is_reported_once_and_put_back() {
     );
     assert!(reported.iter().all(|e| e.body == body));
 }
+
+#[test]
+fn a_resting_jelly_falls_asleep_and_a_sphere_dropped_on_it_wakes_it() {
+    let mut app = app(60.0);
+    let scene = GameScene {
+        lift: 0.1,
+        ..scene("jelly_cube_drop")
+    };
+    let body = {
+        let world = app.world_mut();
+        let mut commands = world.commands();
+        let body = scene
+            .spawn(&mut commands, VolumeMethod::PAPER_IMPULSES, Vec3::ZERO)
+            .unwrap();
+        world.flush();
+        body
+    };
+    let stats = |app: &App| app.world().get::<SoftBodyStats>(body).unwrap().clone();
+    while !stats(&app).sleeping {
+        app.update();
+        assert!(stats(&app).steps < 600, "not asleep after 10 s");
+    }
+    let asleep_at = stats(&app).steps;
+    // Asleep: it costs nothing and stays where it is. `top`: the height of its top face's
+    // middle, under where the sphere will land.
+    let centre = app
+        .world()
+        .get::<SoftBody>(body)
+        .unwrap()
+        .state()
+        .centre_of_mass();
+    let top = |app: &App| {
+        app.world()
+            .get::<SoftBody>(body)
+            .unwrap()
+            .state()
+            .positions()
+            .iter()
+            .filter(|p| (p.xz() - centre.xz()).length() < 0.05)
+            .fold(f32::NEG_INFINITY, |top, p| top.max(p.y))
+    };
+    let resting_top = top(&app);
+    for _ in 0..30 {
+        app.update();
+    }
+    assert!(stats(&app).sleeping);
+    assert_eq!(top(&app), resting_top);
+    // A 20 kg sphere dropped on it wakes it and dents it.
+    app.world_mut().spawn((
+        RigidSphere::new(0.1, 20.0),
+        Transform::from_xyz(centre.x, resting_top + 0.4, centre.z),
+    ));
+    let mut lowest_top = resting_top;
+    for _ in 0..60 {
+        app.update();
+        lowest_top = lowest_top.min(top(&app));
+    }
+    let after = stats(&app);
+    assert!(after.steps > asleep_at + 60);
+    assert!(
+        lowest_top < resting_top - 0.02,
+        "{lowest_top} against {resting_top}"
+    );
+    assert!(after.peak_volume_error_pct < 2.0, "{after:?}");
+}

@@ -120,6 +120,9 @@ pub struct SoftBodyState {
     /// Per particle in contact, the share `f` of a push into the contact that the particle keeps:
     /// 0 against a static collider, `w_s / (w_p + w_s)` against a sphere.
     pub(crate) contact_kept: Vec<f32>,
+    /// Per particle, where static friction holds it on the static collider it touches (NaN:
+    /// touching none); see `contacts.rs`, `static_friction`.
+    pub(crate) friction_anchors: Vec<Vec3>,
     /// Per particle in contact with a sphere, that sphere's index in the slice the passes get;
     /// `u32::MAX` otherwise.
     pub(crate) contact_sphere: Vec<u32>,
@@ -154,6 +157,8 @@ pub struct SoftBodyState {
     /// a guess of whether it will be again, which decides only how the check is computed,
     /// never its result (see `PassView::ring_impulse`).
     pub(crate) ring_corrected: Vec<bool>,
+    /// Whether the body sleeps, and for how long it has been quiet (see `sleep.rs`).
+    pub(crate) sleep: super::sleep::Sleep,
 }
 
 impl SoftBodyState {
@@ -188,6 +193,7 @@ impl SoftBodyState {
             previews: vec![Point4::default(); n],
             clamp_bounds: Default::default(),
             contact_kept: vec![0.0; n],
+            friction_anchors: vec![Vec3::NAN; n],
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::with_capacity(n),
             clamp_motion: ClampMotion::default(),
@@ -198,6 +204,7 @@ impl SoftBodyState {
             sphere_positions: Vec::new(),
             chunk_findings: ChunkFindings::for_particles(n),
             ring_corrected: vec![false; n],
+            sleep: super::sleep::Sleep::new(Some(Default::default()), n),
             runaway_limits: Default::default(),
             runaway: None,
             sane_centre: None,
@@ -302,8 +309,9 @@ impl SoftBodyState {
         &self.velocities
     }
 
-    /// Particle velocities, to push a body around.
+    /// Particle velocities, to push a body around (it wakes if asleep).
     pub fn velocities_mut(&mut self) -> &mut [Vec3] {
+        self.sleep.wake();
         &mut self.velocities
     }
 
@@ -314,6 +322,7 @@ impl SoftBodyState {
 
     /// Moves every particle by `offset` (the rest state is unchanged).
     pub fn translate(&mut self, offset: Vec3) {
+        self.sleep.wake();
         self.positions.iter_mut().for_each(|p| *p += offset);
         self.previous_positions.copy_from_slice(&self.positions);
     }
@@ -321,6 +330,7 @@ impl SoftBodyState {
     /// Maps every particle through `f` (for placing a body); the rest state is unchanged, so a
     /// map that is not a rigid motion is a deformation the body will undo.
     pub fn map_positions(&mut self, f: impl Fn(Vec3) -> Vec3) {
+        self.sleep.wake();
         self.positions.iter_mut().for_each(|p| *p = f(*p));
         self.previous_positions.copy_from_slice(&self.positions);
     }
@@ -333,6 +343,9 @@ impl SoftBodyState {
     /// Replaces the material (live edits); masses follow a change of density.
     pub fn set_material(&mut self, material: SoftBodyMaterial) -> Result<(), MaterialError> {
         material.validate()?;
+        if material != self.material {
+            self.sleep.wake();
+        }
         let density_changed = material.density != self.material.density;
         let elasticity_changed = material.elasticity != self.material.elasticity;
         self.material = material;
@@ -353,6 +366,11 @@ impl SoftBodyState {
     /// Current rest length of each spring (one per mesh edge), after plasticity.
     pub fn spring_rest_lengths(&self) -> &[f32] {
         &self.spring_rest
+    }
+
+    /// This step's kinematic particles and their targets.
+    pub(crate) fn kinematic_targets(&self) -> impl Iterator<Item = (usize, Vec3)> + '_ {
+        self.kinematic.iter().map(|&(i, x)| (i as usize, x))
     }
 
     /// Frees every particle made kinematic for the last step.
@@ -556,6 +574,9 @@ impl SoftBodyState {
         let Some(p) = self.material.plasticity else {
             return;
         };
+        if self.sleep.asleep {
+            return;
+        }
         for (e, &[i, j]) in self.mesh.edges().iter().enumerate() {
             let length = self.positions[i as usize].distance(self.positions[j as usize]);
             let rest0 = self.spring_rest0[e];

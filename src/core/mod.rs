@@ -13,6 +13,7 @@ pub mod obj;
 pub mod parallel;
 pub mod roots;
 pub mod runaway;
+pub mod sleep;
 pub mod surface_mesh;
 pub mod tet_mesh;
 pub mod tetgen;
@@ -32,6 +33,7 @@ pub use material::{
 pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
 pub use runaway::{Runaway, RunawayLimits};
+pub use sleep::SleepSettings;
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
 pub use tet_mesh::{Blocks, TetMesh, TetMeshError};
 pub use tetgen::{TetGenError, TetGenFile, parse_tetgen, write_tetgen};

@@ -52,6 +52,9 @@ impl SoftBodyState {
         colliders: &[ColliderInstance],
         parallel: &dyn Parallel,
     ) -> u32 {
+        if !self.material.is_substepped() || self.stays_asleep(h, spheres, colliders) {
+            return 0;
+        }
         let substeps = match (self.material.method, self.material.elasticity) {
             (VolumeMethod::Xpbd(s), _) => s.substeps.max(1),
             (VolumeMethod::Impulses(_), Elasticity::Elastic(e)) => {
@@ -60,7 +63,9 @@ impl SoftBodyState {
             }
             _ => return 0,
         };
-        self.substeps(h, substeps, spheres, colliders, parallel)
+        let contacts = self.substeps(h, substeps, spheres, colliders, parallel);
+        self.update_sleep(h, spheres, colliders);
+        contacts
     }
 
     /// The speed that sets a physical material's substeps (see
