@@ -7,11 +7,12 @@
 //! speed over that time under [`SleepSettings::speed`]); its velocities are then zero and its
 //! positions stay as they are. The test is on positions, not on the particles' velocities: a
 //! resting body under the paper's impulses keeps small velocities that come and go (each
-//! substep's volume correction against the edges' sag, up to 0.1 m/s) while its particles
-//! stay within a fraction of a millimetre. It wakes when a step finds it disturbed:
+//! substep's volume correction against the edges' sag) while its particles stay within a
+//! fraction of a millimetre (PERFORMANCE.md, stop 30). It wakes when a step finds it disturbed:
 //! gravity changed, a kinematic particle asked to move, a rigid sphere within reach of its
 //! bounds, a collider near it moved, appeared or went away; or when the game touches it
-//! ([`SoftBodyState::velocities_mut`], [`SoftBodyState::map_positions`],
+//! ([`SoftBodyState::velocities_mut`], [`SoftBodyState::translate`],
+//! [`SoftBodyState::map_positions`],
 //! [`SoftBodyState::set_material`], [`SoftBodyState::wake_up`]). A sphere in reach keeps it
 //! awake: a sleeping body would not hold a sphere up. The paper's explicit springs never sleep,
 //! so its scenes run as published.
