@@ -143,10 +143,11 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
         stats.volume_error_pct, stats.peak_volume_error_pct
     ));
     ui.label(format!(
-        "solver {:.2} ms/step, {} inverted tets, {} tets",
+        "solver {:.2} ms/step, {} inverted tets, {} tets{}",
         stats.step_ms,
         stats.inverted_tets,
-        body.state().mesh().tet_count()
+        body.state().mesh().tet_count(),
+        if stats.sleeping { ", asleep" } else { "" }
     ));
     let mut m = *body.state().material();
     let mut chosen = m.method.name();
