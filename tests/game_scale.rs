@@ -155,6 +155,20 @@ fn app(hz: f64) -> App {
     app
 }
 
+/// Spawns `scene` with the paper's method into `app`; returns its body.
+fn spawn(app: &mut App, scene: &GameScene) -> Entity {
+    let world = app.world_mut();
+    let body = scene
+        .spawn(
+            &mut world.commands(),
+            VolumeMethod::PAPER_IMPULSES,
+            Vec3::ZERO,
+        )
+        .unwrap();
+    world.flush();
+    body
+}
+
 #[test]
 fn the_plugin_steps_a_game_scene_as_the_core_does() {
     let scene = GameScene {
@@ -163,15 +177,7 @@ fn the_plugin_steps_a_game_scene_as_the_core_does() {
     };
     let core = scene.run(VolumeMethod::PAPER_IMPULSES, 60.0).unwrap();
     let mut app = app(60.0);
-    let body = {
-        let world = app.world_mut();
-        let mut commands = world.commands();
-        let body = scene
-            .spawn(&mut commands, VolumeMethod::PAPER_IMPULSES, Vec3::ZERO)
-            .unwrap();
-        world.flush();
-        body
-    };
+    let body = spawn(&mut app, &scene);
     while app.world().get::<SoftBodyStats>(body).unwrap().steps < 60 {
         app.update();
     }
@@ -238,15 +244,7 @@ fn a_resting_jelly_falls_asleep_and_a_sphere_dropped_on_it_wakes_it() {
         lift: 0.1,
         ..scene("jelly_cube_drop")
     };
-    let body = {
-        let world = app.world_mut();
-        let mut commands = world.commands();
-        let body = scene
-            .spawn(&mut commands, VolumeMethod::PAPER_IMPULSES, Vec3::ZERO)
-            .unwrap();
-        world.flush();
-        body
-    };
+    let body = spawn(&mut app, &scene);
     let stats = |app: &App| app.world().get::<SoftBodyStats>(body).unwrap().clone();
     while !stats(&app).sleeping {
         app.update();
