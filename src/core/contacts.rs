@@ -16,8 +16,8 @@
 //! Friction against a static collider holds a particle where it stands, not only its velocity
 //! (see [`static_friction`]): with velocity-only friction the volume impulses' small pushes at
 //! a resting body's base, each stopped by friction only while it pressed into the ground, made
-//! the body walk (a resting rubber cube crept 3 cm/s across the ground and never came to
-//! rest). Against a sphere, friction is Coulomb's on the relative velocity.
+//! the body walk across the ground and never come to rest (PERFORMANCE.md, stop 30). Against a
+//! sphere, friction is Coulomb's on the relative velocity.
 //!
 //! The combined friction of two surfaces is the geometric mean of their coefficients.
 
