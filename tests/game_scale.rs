@@ -6,7 +6,7 @@ use std::time::Duration;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::core::VolumeMethod;
-use bevy_soft_body::game_scenes::{GameScene, MeshStyle};
+use bevy_soft_body::game_scenes::GameScene;
 use bevy_soft_body::prelude::*;
 
 const RATES: [f32; 3] = [30.0, 60.0, 120.0];
@@ -18,22 +18,22 @@ fn scene(name: &str) -> GameScene {
         .unwrap_or_else(|| panic!("no scene {name}"))
 }
 
-/// Every scene but the graded grids (in the ignored test below).
+/// Every scene, at every rate: finite, never caught running away, and (but for the graded
+/// jelly, whose landing still inverts tets: the ignored test below) few tets inverted.
 #[test]
 fn game_scenes_stay_finite_and_never_run_away() {
-    for scene in GameScene::standard()
-        .into_iter()
-        .filter(|s| !matches!(s.mesh, MeshStyle::Graded(_)))
-    {
+    for scene in GameScene::standard() {
         for hz in RATES {
             let r = scene.run(VolumeMethod::PAPER_IMPULSES, hz).unwrap();
             assert!(r.finite, "{} at {hz} Hz: {r:?}", scene.name);
             assert_eq!(r.runaways, 0, "{} at {hz} Hz: {r:?}", scene.name);
-            assert!(
-                r.max_inverted_tets < r.tets / 20,
-                "{} at {hz} Hz: {r:?}",
-                scene.name
-            );
+            if scene.name != "jelly_cube_graded" {
+                assert!(
+                    r.max_inverted_tets < r.tets / 20,
+                    "{} at {hz} Hz: {r:?}",
+                    scene.name
+                );
+            }
         }
     }
 }
@@ -81,7 +81,7 @@ fn stiff_bodies_rest_near_their_height_and_soft_ones_squash_and_recover() {
 /// The target for every scene, irregular meshes included; not met yet (see the
 /// README's game-scale table): run with `--ignored`.
 #[test]
-#[ignore = "open: some drops peak over 1 %, irregular meshes run away (README, game scale)"]
+#[ignore = "open: some drops peak over 1 % (README, game scale)"]
 fn every_game_scene_keeps_its_volume_under_one_percent() {
     for scene in GameScene::standard() {
         for hz in RATES {
@@ -119,6 +119,26 @@ fn a_crushed_body_gets_its_volume_back_without_being_thrown() {
         highest < 1.3 * rest_centre,
         "thrown to {highest} (rest {rest_centre})"
     );
+}
+
+#[test]
+fn a_stiff_body_on_an_irregular_mesh_falls_without_deforming() {
+    // Hard rubber on the graded grid (light particles on short, stiff edges), in free fall for
+    // half a second at every rate: a falling body keeps its rest shape. Its edges' dampers, run
+    // as a pass of their own after the projection, made it stretch and run away here.
+    let scene = scene("hard_rubber_cube_graded");
+    for hz in RATES {
+        let mut world = scene.world(VolumeMethod::PAPER_IMPULSES).unwrap();
+        world.colliders.clear();
+        for _ in 0..(hz / 2.0) as usize {
+            world.step(1.0 / hz);
+            assert!(world.body.runaway().is_none(), "{hz} Hz");
+        }
+        let height = world.height_ratio();
+        let metrics = world.body.volume_metrics();
+        assert!((height - 1.0).abs() < 1e-3, "{hz} Hz: height {height}");
+        assert!(metrics.mean_abs_tet_error_pct < 0.01, "{hz} Hz: {metrics:?}");
+    }
 }
 
 #[test]

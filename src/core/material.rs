@@ -186,7 +186,9 @@ pub struct ElasticSettings {
     /// Stiffness-proportional damping `beta`, in seconds: each edge's damper is `beta` times
     /// its spring constant, so a mode of angular frequency `w` has the damping ratio
     /// `beta w / 2` (fast, small wobbles die first, a slow swing of the whole body is hardly
-    /// touched; `SoftBodyMaterial::linear_damping` settles those).
+    /// touched; `SoftBodyMaterial::linear_damping` settles those). Solved with the edges, in
+    /// their projection, so that a damper too strong for the substep saturates as the edge
+    /// does.
     pub damping: f32,
     /// The longest substep of the shape solve, in seconds: a step of `h` is cut into
     /// `ceil(h / max_substep)` substeps, so the body behaves the same at 30 and at 240 Hz.

@@ -11,6 +11,13 @@
 //! damps the springs. Momentum is conserved by every projection (the constraint gradients sum
 //! to zero).
 //!
+//! A physical material's edges are damped inside their projection, in XPBD's own form
+//! (Macklin et al. 2016, eq. 26): with stiffness-proportional damping `beta` the damping term of
+//! an edge is `gamma = beta / h_s`, the same for every edge, and the projection solves the
+//! spring and its damper together, implicitly. A separate pass of velocity dampers after the
+//! projection (what the paper's explicit springs keep) is unstable for stiff materials: a hard
+//! rubber cube on a graded mesh deformed in free fall and ran away (PERFORMANCE.md).
+//!
 //! Decisions: gravity is applied per substep (stored by `apply_forces`, which adds no spring
 //! forces for this method); kinematic particles move to their target in equal parts; a rigid
 //! sphere is tested at its position advanced to each substep at its current velocity, and left
@@ -123,7 +130,12 @@ impl SoftBodyState {
         let hs = h / substeps as f32;
         let gravity = self.gravity;
         let hs2 = hs * hs;
-        let damping = self.any_damping();
+        // Stiffness-proportional damping in the edges' projection (physical materials), or
+        // dampers on the velocities (the paper's springs).
+        let (edge_damping, dampers) = match self.material.elasticity {
+            Elasticity::Elastic(e) => (e.damping / hs, false),
+            Elasticity::Springs { .. } => (0.0, self.any_damping()),
+        };
         for k in 0..substeps {
             // Predict; `previews` holds where each particle started the substep.
             for i in 0..self.positions.len() {
@@ -133,7 +145,7 @@ impl SoftBodyState {
                 self.previews[i] = Point4::new(self.positions[i]);
                 self.positions[i] += hs * self.velocities[i];
             }
-            self.project_edges(hs2);
+            self.project_edges(hs2, edge_damping);
             if volumes {
                 self.project_volumes();
             }
@@ -159,7 +171,7 @@ impl SoftBodyState {
                 s.position = start;
             }
             contacts += self.resolve_static_contacts(hs, colliders);
-            if damping {
+            if dampers {
                 self.damp_springs(hs);
             }
             let drag = self.material.linear_damping;
@@ -232,8 +244,12 @@ impl SoftBodyState {
     /// (see [`Blocks::edges`](super::tet_mesh::Blocks::edges)): the same order the other
     /// methods' dampers take, where consecutive constraints share no particle and do not wait
     /// for each other's results. An edge of zero stiffness (infinite compliance) is skipped.
-    fn project_edges(&mut self, hs2: f32) {
+    /// `gamma` is XPBD's damping term (see the module's doc): the projection is
+    /// `dlambda = -(C + gamma grad C . (x - x_start)) / ((1 + gamma) w / L0^2 + alpha)`, the
+    /// undamped one when it is zero.
+    fn project_edges(&mut self, hs2: f32, gamma: f32) {
         let x = &mut self.positions;
+        let start = &self.previews;
         let edges = self.mesh.edges();
         for &e in self.mesh.blocks().edges.items() {
             let e = e as usize;
@@ -252,7 +268,12 @@ impl SoftBodyState {
             }
             let n = d / length;
             let c = (length - rest) / rest;
-            let lambda = -c / ((wi + wj) / (rest * rest) + alpha);
+            let lambda = if gamma > 0.0 {
+                let rate = n.dot((x[j] - start[j].vec3()) - (x[i] - start[i].vec3())) / rest;
+                -(c + gamma * rate) / ((1.0 + gamma) * (wi + wj) / (rest * rest) + alpha)
+            } else {
+                -c / ((wi + wj) / (rest * rest) + alpha)
+            };
             let push = n * (lambda / rest);
             x[i] -= push * wi;
             x[j] += push * wj;
