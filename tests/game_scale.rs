@@ -137,7 +137,10 @@ fn a_stiff_body_on_an_irregular_mesh_falls_without_deforming() {
         let height = world.height_ratio();
         let metrics = world.body.volume_metrics();
         assert!((height - 1.0).abs() < 1e-3, "{hz} Hz: height {height}");
-        assert!(metrics.mean_abs_tet_error_pct < 0.01, "{hz} Hz: {metrics:?}");
+        assert!(
+            metrics.mean_abs_tet_error_pct < 0.01,
+            "{hz} Hz: {metrics:?}"
+        );
     }
 }
 

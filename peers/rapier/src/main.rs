@@ -1,15 +1,20 @@
 //! The game-scale scenes of bevy_soft_body in rapier3d 0.36's soft bodies, side by side.
 //!
 //! cargo run --release --all-features --example game_figures -- --export out/scenes
-//! cargo run --release --manifest-path peers/rapier/Cargo.toml -- out/scenes [HZ,...] [MODELS]
+//! cargo run --release --manifest-path peers/rapier/Cargo.toml -- out/scenes [HZ,...] [MODELS] [SUBSTEPS,...] [POISSON]
 //!
 //! Reads `scenes.csv` and the TetGen meshes that `game_figures --export` wrote, builds each body
 //! as a rapier soft body of the same tets and particle masses (a quarter of each tet's mass to
 //! each corner), on a fixed ground with the same friction, with the same rigid sphere, at
 //! g = 9.81, and steps it at each rate (default 60 Hz) with each cell model (`volume`,
-//! `corotational`, `neohookean`; default all) in rapier's default settings (one thread).
-//! Prints the columns of `game_figures`' summary.csv (method `rapier-MODEL`) and writes them to
-//! `rapier.csv` beside the scenes.
+//! `corotational`, `neohookean`; default all) in rapier's default settings (one thread), with
+//! each count of substeps (`IntegrationParameters::num_solver_iterations`; default rapier's
+//! own, 4): more substeps is how a rapier user buys accuracy, so a list finds what rapier needs
+//! to reach a given volume error and what it then costs. Prints the columns of `game_figures`'
+//! summary.csv (method `rapier-MODEL`, or `rapier-MODEL-N` for N substeps other than the
+//! default) and writes them to `rapier.csv` beside the scenes. The elastic cells take the scene's
+//! Young's modulus and Poisson's ratio `POISSON` (default 0.45; rapier clamps it to 0.499): a
+//! rapier user who wants the volume kept raises it.
 
 use std::io::Write;
 use std::path::{Path, PathBuf};
@@ -100,7 +105,14 @@ struct Run {
     ms: f64,
 }
 
-fn run(scene: &Scene, dir: &Path, model: SoftBodyCellModel, hz: f32) -> Result<Run, String> {
+fn run(
+    scene: &Scene,
+    dir: &Path,
+    model: SoftBodyCellModel,
+    hz: f32,
+    substeps: usize,
+    poisson: f32,
+) -> Result<Run, String> {
     let (rest, tets) = read_tetgen(dir, &scene.name)?;
     let rest_volumes: Vec<f32> = tets
         .iter()
@@ -144,7 +156,7 @@ fn run(scene: &Scene, dir: &Path, model: SoftBodyCellModel, hz: f32) -> Result<R
     let mut material = SoftBodyMaterial::default();
     if scene.youngs_modulus > 0.0 {
         material.young_modulus = scene.youngs_modulus;
-        material.poisson_ratio = 0.45;
+        material.poisson_ratio = poisson;
     }
     let handle = soft_bodies.insert(
         SoftBodyBuilder::new(positions)
@@ -158,6 +170,7 @@ fn run(scene: &Scene, dir: &Path, model: SoftBodyCellModel, hz: f32) -> Result<R
 
     let parameters = IntegrationParameters {
         dt: 1.0 / hz,
+        num_solver_iterations: substeps,
         ..Default::default()
     };
     let mut pipeline = PhysicsPipeline::new();
@@ -224,7 +237,7 @@ fn main() -> Result<(), String> {
     let mut args = std::env::args().skip(1);
     let dir = PathBuf::from(
         args.next()
-            .ok_or("usage: rapier_peer DIR [HZ,...] [MODELS]")?,
+            .ok_or("usage: rapier_peer DIR [HZ,...] [MODELS] [SUBSTEPS,...]")?,
     );
     let rates: Vec<f32> = match args.next() {
         Some(list) => list
@@ -245,6 +258,25 @@ fn main() -> Result<(), String> {
             other => Err(format!("unknown cell model `{other}`")),
         })
         .collect::<Result<_, _>>()?;
+    let default_substeps = IntegrationParameters::default().num_solver_iterations;
+    let substeps: Vec<usize> = match args.next() {
+        Some(list) => list
+            .split(',')
+            .map(|v| match v.parse() {
+                Ok(n) if n > 0 => Ok(n),
+                _ => Err(format!("`{v}` is not a count of substeps")),
+            })
+            .collect::<Result<_, _>>()?,
+        None => vec![default_substeps],
+    };
+    let poisson: f32 = match args.next() {
+        Some(v) => v
+            .parse()
+            .ok()
+            .filter(|p| (0.0..0.5).contains(p))
+            .ok_or(format!("`{v}` is not a Poisson's ratio in [0, 0.5)"))?,
+        None => 0.45,
+    };
     let header = "scene,method,hz,material,tets,peak_volume_error_pct,final_volume_error_pct,\
                   final_mean_tet_error_pct,lowest_height,final_height,max_inverted_tets,finite,\
                   runaways,mean_step_ms";
@@ -253,10 +285,20 @@ fn main() -> Result<(), String> {
     for scene in read_scenes(&dir)? {
         let tets = read_tetgen(&dir, &scene.name)?.1.len();
         for (label, model) in &models {
-            for &hz in &rates {
-                let r = run(&scene, &dir, *model, hz)?;
+            for (&hz, &n) in rates
+                .iter()
+                .flat_map(|hz| substeps.iter().map(move |n| (hz, n)))
+            {
+                let r = run(&scene, &dir, *model, hz, n, poisson)?;
+                let mut method = format!("rapier-{label}");
+                if n != default_substeps {
+                    method += &format!("-{n}");
+                }
+                if poisson != 0.45 && *model != SoftBodyCellModel::Volume {
+                    method += &format!("-nu{poisson}");
+                }
                 let row = format!(
-                    "{},rapier-{label},{hz},{},{tets},{:.4},{:.4},,{:.4},{:.4},{},{},,{:.4}",
+                    "{},{method},{hz},{},{tets},{:.4},{:.4},,{:.4},{:.4},{},{},,{:.4}",
                     scene.name,
                     scene.material,
                     r.peak,
