@@ -95,6 +95,41 @@ fn every_game_scene_keeps_its_volume_under_one_percent() {
     }
 }
 
+/// A dropped body bounces lower than it fell: its lowest particle never climbs back to its
+/// drop height. Open: the graded hard rubber cube bounces from 1 m to 2 m at 60 Hz (its
+/// landing crushes its smallest tets, and their restoring move comes back as speed through its
+/// stiff edges; PERFORMANCE.md, stop 31): run with `--ignored`.
+#[test]
+#[ignore = "open: the graded hard rubber cube bounces higher than it fell (README, game scale)"]
+fn no_dropped_body_bounces_higher_than_it_fell() {
+    for scene in GameScene::standard().into_iter().filter(|s| s.lift > 0.0) {
+        for hz in RATES {
+            let mut world = scene.world(VolumeMethod::PAPER_IMPULSES).unwrap();
+            let lowest = |w: &bevy_soft_body::game_scenes::GameWorld| {
+                w.body
+                    .positions()
+                    .iter()
+                    .fold(f32::INFINITY, |m, p| m.min(p.y))
+            };
+            let (mut landed, mut highest_after) = (false, 0.0f32);
+            for _ in 0..(scene.duration_secs * hz) as usize {
+                world.step(1.0 / hz);
+                let y = lowest(&world);
+                landed |= y < 0.01;
+                if landed {
+                    highest_after = highest_after.max(y);
+                }
+            }
+            assert!(
+                highest_after < scene.lift,
+                "{} at {hz} Hz: dropped from {} m, back up to {highest_after} m",
+                scene.name,
+                scene.lift
+            );
+        }
+    }
+}
+
 #[test]
 fn a_crushed_body_gets_its_volume_back_without_being_thrown() {
     // A jelly cube flattened to half its height on the ground (half its volume), at rest.
