@@ -237,7 +237,7 @@ fn main() -> Result<(), String> {
     let mut args = std::env::args().skip(1);
     let dir = PathBuf::from(
         args.next()
-            .ok_or("usage: rapier_peer DIR [HZ,...] [MODELS] [SUBSTEPS,...]")?,
+            .ok_or("usage: rapier_peer DIR [HZ,...] [MODELS] [SUBSTEPS,...] [POISSON]")?,
     );
     let rates: Vec<f32> = match args.next() {
         Some(list) => list
