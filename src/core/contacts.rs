@@ -370,9 +370,9 @@ mod tests {
     use glam::{Quat, UVec3};
 
     /// A rubber cube (1 MPa, 0.5 m) and a jelly cube resting on the ground at 60 Hz stay where
-    /// they are: with velocity-only friction the rubber cube crept 0.23 m from 2 s to 10 s
-    /// (about 3 cm/s), pushed along by its own volume impulses. On ice (no friction) nothing
-    /// pushes it either: the impulses conserve momentum.
+    /// they are: with velocity-only friction the rubber cube crept along, pushed by its own
+    /// volume impulses (PERFORMANCE.md, stop 30). On ice (no friction) nothing pushes it
+    /// either: the impulses conserve momentum.
     #[test]
     fn a_resting_body_does_not_walk_across_the_ground() {
         for (material, friction) in [
