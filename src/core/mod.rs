@@ -3,6 +3,7 @@
 
 pub mod body;
 pub mod contacts;
+pub mod deviatoric;
 pub mod embedding;
 pub mod geometry;
 pub mod grid;

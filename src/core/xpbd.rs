@@ -1,6 +1,7 @@
 //! Substepped XPBD: the peer the paper's method is measured against (see
-//! [`VolumeMethod::Xpbd`]), and, without its volume constraints, the shape solve of a
-//! physical material under the paper's impulses (see [`SoftBodyState::shape_pass`]).
+//! [`VolumeMethod::Xpbd`]), and the substeps of a physical material under the paper's
+//! impulses, whose shape solve is the tets' shape constraints of `deviatoric.rs` (or these
+//! edges, for plastic springs; see [`SoftBodyState::shape_pass`]).
 //!
 //! Each step is split into substeps. A substep predicts every particle's position from its
 //! velocity and gravity, projects every edge constraint `C = (L - L0) / L0` with compliance
@@ -11,7 +12,7 @@
 //! damps the springs. Momentum is conserved by every projection (the constraint gradients sum
 //! to zero).
 //!
-//! A physical material's edges are damped inside their projection, in XPBD's own form
+//! A physical material's constraints are damped inside their projection, in XPBD's own form
 //! (Macklin et al. 2016, eq. 26): with stiffness-proportional damping `beta` the damping term of
 //! an edge is `gamma = beta / h_s`, the same for every edge, and the projection solves the
 //! spring and its damper together, implicitly. A separate pass of velocity dampers after the
@@ -42,13 +43,13 @@ impl SoftBodyState {
     ///
     /// For [`VolumeMethod::Xpbd`] each substep projects the edges and the tets' volume
     /// constraints. For a physical material under the paper's impulses each substep is the
-    /// paper's step at the substep's length, with the edges as XPBD constraints in place of
-    /// its explicit springs: gravity, the edges, the contacts and damping give the velocities
-    /// (the previewed positions `x + h_s v` are where the edges put the particles), then the
-    /// one-ring and per-tet impulses restore the volume on those previews, then `x += h_s v`.
-    /// The volume passes run in every substep, not once a step: the edges of a body under a
-    /// load pull its volume towards the spring network's own equilibrium (a Poisson's ratio of
-    /// 1/4), and a body crushed within a step by a landing cannot be restored after it.
+    /// paper's step at the substep's length, with the tets' shape constraints (`deviatoric.rs`;
+    /// the edges for plastic springs) in place of its explicit springs: gravity, the shape
+    /// constraints, the contacts and damping give the velocities (the previewed positions
+    /// `x + h_s v` are where the shape solve puts the particles), then the one-ring and per-tet
+    /// impulses restore the volume on those previews, then `x += h_s v`. The volume passes run
+    /// in every substep, not once a step: a body crushed within a step by a landing cannot be
+    /// restored after it.
     ///
     /// [`SoftBodyMaterial::is_substepped`]: super::material::SoftBodyMaterial::is_substepped
     /// [`VolumeMethod::Xpbd`]: super::material::VolumeMethod::Xpbd
@@ -130,12 +131,21 @@ impl SoftBodyState {
         let hs = h / substeps as f32;
         let gravity = self.gravity;
         let hs2 = hs * hs;
-        // Stiffness-proportional damping in the edges' projection (physical materials), or
+        // Stiffness-proportional damping in the shape projection (physical materials), or
         // dampers on the velocities (the paper's springs).
-        let (edge_damping, dampers) = match self.material.elasticity {
+        let (shape_damping, dampers) = match self.material.elasticity {
             Elasticity::Elastic(e) => (e.damping / hs, false),
             Elasticity::Springs { .. } => (0.0, self.any_damping()),
         };
+        // A physical material under the impulses keeps its shape per tet, unless its plastic
+        // springs are the edges (see `ElasticSettings`).
+        let tet_compliance = match (self.material.elasticity, self.material.plasticity) {
+            (Elasticity::Elastic(e), None) if !volumes => Some(e.tet_compliance()),
+            _ => None,
+        };
+        if tet_compliance.is_some() {
+            self.refresh_tet_grams();
+        }
         for k in 0..substeps {
             // Predict; `previews` holds where each particle started the substep.
             for i in 0..self.positions.len() {
@@ -145,7 +155,10 @@ impl SoftBodyState {
                 self.previews[i] = Point4::new(self.positions[i]);
                 self.positions[i] += hs * self.velocities[i];
             }
-            self.project_edges(hs2, edge_damping);
+            match tet_compliance {
+                Some(compliance) => self.project_tet_shapes(compliance, hs2, shape_damping),
+                None => self.project_edges(hs2, shape_damping),
+            }
             if volumes {
                 self.project_volumes();
             }
