@@ -159,10 +159,8 @@ pub struct SoftBodyState {
     pub(crate) ring_corrected: Vec<bool>,
     /// Whether the body sleeps, and for how long it has been quiet (see `sleep.rs`).
     pub(crate) sleep: super::sleep::Sleep,
-    /// Each tet's `Dm^-1`, for the deviatoric shape model (see `deviatoric.rs`).
-    pub(crate) tet_rest_inverses: Vec<glam::Mat3>,
-    /// Each tet's Gram matrix of its corners' gradients and inverse masses, this step.
-    pub(crate) tet_grams: Vec<super::deviatoric::Sym3>,
+    /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
+    pub(crate) shape_bundles: Vec<super::deviatoric::ShapeBundle>,
 }
 
 impl SoftBodyState {
@@ -214,8 +212,7 @@ impl SoftBodyState {
             sane_centre: None,
             shortest_edge,
             substep_velocities: vec![Vec3::ZERO; n],
-            tet_grams: vec![Default::default(); mesh.tet_count()],
-            tet_rest_inverses: super::deviatoric::rest_inverses(mesh.positions(), mesh.tets()),
+            shape_bundles: super::deviatoric::shape_bundles(&mesh),
             rest_extent: {
                 let (lo, hi) = mesh.bounds();
                 (hi - lo).length()

@@ -9,30 +9,39 @@
 //! Young's modulus and Poisson's ratio. In an orthonormal basis `B_k` of the symmetric
 //! traceless matrices, `mu |dev E|^2` is the sum of five squares `c_k = <B_k, E>`, each an
 //! XPBD constraint of compliance `1 / (2 mu V0)`; `det F - 1` is one of compliance
-//! `1 / (K V0)`. They are projected in turn within the tet (Gauss-Seidel; projecting the five
-//! together from one `F` is cheaper but overshoots on flat tets: a graded hard rubber cube ran
-//! away). Five constraints rather than one on `|dev E|`: that one has no gradient at zero
+//! `1 / (K V0)`. They are projected in turn within the tet (Gauss-Seidel: projecting the five
+//! together from one `F` is cheaper but overshoots on flat tets). Five constraints rather than one on `|dev E|`: that one has no gradient at zero
 //! strain, which stiff materials keep crossing. The gradient of a constraint on `F` is a
 //! matrix `A` (`F B_k` for `c_k`, the cofactor of `F` for `det F`), its part on corner `i` is
 //! `A g_i` (`g_i` the corner's row of `Dm^-1`, `g_0` minus their sum), and a projection moves
 //! `F` by `dlambda A S` with `S = sum w_i g_i g_i^T`: `F` is kept current without re-reading
 //! the positions.
 //!
+//! The tets are projected four at a time in SIMD lanes ([`ShapeBundle`]: four tets that share
+//! no vertex, the same result as one after another), in bundles taken in index order: a sweep
+//! in index order carries a correction across the mesh in one pass, which the volume passes'
+//! blocks' order does not (PERFORMANCE.md, stop 32).
+//!
 //! Why not the edges: a spring network has a Poisson's ratio of 1/4, so under a load the
 //! edges pull the volume towards their own equilibrium, every substep, against the impulses,
-//! and on an irregular mesh their stiffness is as irregular as the mesh (a graded jelly cube
-//! peaked at 3-13 % with them, 0.6-0.9 % with this model). The deviatoric stress is traceless:
+//! and on an irregular mesh their stiffness is as irregular as the mesh (PERFORMANCE.md,
+//! stop 32). The deviatoric stress is traceless:
 //! it does no work on a change of volume, so it leaves the volume where the impulses put it
 //! (its projection, weighted by the corners' masses, still moves a tet's volume a little); the
 //! hydrostatic one pulls only towards the rest volume.
 //!
 //! Damping is XPBD's (Macklin et al. 2016, eq. 26), `gamma = beta / h_s`, on every constraint.
 
+use std::f32::consts::FRAC_1_SQRT_2;
+
 use glam::{Mat3, Vec3};
+use wide::f32x4;
 
 use super::body::SoftBodyState;
+use super::lanes::{LANES, Vec3x4};
 #[cfg(doc)]
 use super::material::ElasticSettings;
+use super::tet_mesh::TetMesh;
 
 /// The basis `B_k` of the deviatoric constraints, orthonormal under the Frobenius product:
 /// `(e_x e_x - e_y e_y) / sqrt 2`, `(e_x e_x + e_y e_y - 2 e_z e_z) / sqrt 6`, and
@@ -51,157 +60,275 @@ const DEVIATORIC_BASIS: [[[f32; 3]; 3]; 5] = {
     ]
 };
 
-/// `F B_k`, the gradient of the deviatoric constraint `k` on `F`, written out by the basis'
-/// structure (see `DEVIATORIC_BASIS`).
-#[inline]
-fn deviatoric_gradient(f: &Mat3, k: usize) -> Mat3 {
-    const S2: f32 = std::f32::consts::FRAC_1_SQRT_2;
-    const S6: f32 = 0.408_248_3;
-    let (fx, fy, fz) = (f.x_axis, f.y_axis, f.z_axis);
-    match k {
-        0 => Mat3::from_cols(fx * S2, fy * -S2, Vec3::ZERO),
-        1 => Mat3::from_cols(fx * S6, fy * S6, fz * (-2.0 * S6)),
-        2 => Mat3::from_cols(fy * S2, fx * S2, Vec3::ZERO),
-        3 => Mat3::from_cols(fz * S2, Vec3::ZERO, fx * S2),
-        _ => Mat3::from_cols(Vec3::ZERO, fz * S2, fy * S2),
+/// Three columns of [`Vec3x4`]: a 3x3 matrix per lane.
+#[derive(Clone, Copy, Debug)]
+struct Mat3x4([Vec3x4; 3]);
+
+impl Mat3x4 {
+    const ZERO: Mat3x4 = Mat3x4([Vec3x4::ZERO; 3]);
+
+    /// `sum_k x_k g_k^T`: a tet's `F` from its corners and their gradients.
+    #[inline(always)]
+    fn deformation(x: &[Vec3x4; 4], g: &[Vec3x4; 4]) -> Mat3x4 {
+        let column = |c: fn(&Vec3x4) -> f32x4| {
+            (x[0].scale(c(&g[0])) + x[1].scale(c(&g[1])))
+                + (x[2].scale(c(&g[2])) + x[3].scale(c(&g[3])))
+        };
+        Mat3x4([column(|v| v.x), column(|v| v.y), column(|v| v.z)])
+    }
+
+    /// The Frobenius inner product, per lane.
+    #[inline(always)]
+    fn frobenius(&self, other: &Mat3x4) -> f32x4 {
+        self.0[0].dot(other.0[0]) + self.0[1].dot(other.0[1]) + self.0[2].dot(other.0[2])
+    }
+
+    #[inline(always)]
+    fn mul_vec(&self, v: Vec3x4) -> Vec3x4 {
+        self.0[0].scale(v.x) + self.0[1].scale(v.y) + self.0[2].scale(v.z)
+    }
+
+    /// `self S` for a symmetric `S` given by its six entries (see [`ShapeBundle::gram`]).
+    #[inline(always)]
+    fn mul_sym(&self, s: &[f32x4; 6]) -> Mat3x4 {
+        let [xx, yy, zz, xy, xz, yz] = *s;
+        Mat3x4([
+            self.mul_vec(Vec3x4 {
+                x: xx,
+                y: xy,
+                z: xz,
+            }),
+            self.mul_vec(Vec3x4 {
+                x: xy,
+                y: yy,
+                z: yz,
+            }),
+            self.mul_vec(Vec3x4 {
+                x: xz,
+                y: yz,
+                z: zz,
+            }),
+        ])
+    }
+
+    #[inline(always)]
+    fn add_scaled(&mut self, other: &Mat3x4, s: f32x4) {
+        for (a, b) in self.0.iter_mut().zip(&other.0) {
+            *a = *a + b.scale(s);
+        }
+    }
+
+    #[inline(always)]
+    fn sub(&self, other: &Mat3x4) -> Mat3x4 {
+        Mat3x4(std::array::from_fn(|c| self.0[c] - other.0[c]))
+    }
+
+    /// The cofactor matrix, `det F F^-T`: the gradient of `det F`.
+    #[inline(always)]
+    fn cofactor(&self) -> Mat3x4 {
+        let [x, y, z] = self.0;
+        Mat3x4([y.cross(z), z.cross(x), x.cross(y)])
+    }
+
+    /// `F B_k`, the gradient of the deviatoric constraint `k` on `F`, written out by the
+    /// basis' structure (see `DEVIATORIC_BASIS`).
+    #[inline(always)]
+    fn deviatoric_gradient(&self, k: usize) -> Mat3x4 {
+        let (s2, s6) = (f32x4::splat(FRAC_1_SQRT_2), f32x4::splat(INV_SQRT_6));
+        let [x, y, z] = self.0;
+        let zero = Vec3x4::ZERO;
+        Mat3x4(match k {
+            0 => [x.scale(s2), y.scale(-s2), zero],
+            1 => [x.scale(s6), y.scale(s6), z.scale(f32x4::splat(-2.0) * s6)],
+            2 => [y.scale(s2), x.scale(s2), zero],
+            3 => [z.scale(s2), zero, x.scale(s2)],
+            _ => [zero, z.scale(s2), y.scale(s2)],
+        })
     }
 }
 
-/// The Frobenius inner product.
-#[inline]
-fn frobenius(a: &Mat3, b: &Mat3) -> f32 {
-    a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
+const INV_SQRT_6: f32 = 0.408_248_3;
+
+/// [`LANES`] tets that share no vertex (one bundle of [`Blocks::tet_bundles`]), with what the
+/// shape projection reads of them in lanes: no projection of a bundle moves a particle another
+/// of its tets reads, so the four are projected at once and the result is that of projecting
+/// them one after another.
+///
+/// [`Blocks::tet_bundles`]: super::tet_mesh::Blocks::tet_bundles
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct ShapeBundle {
+    /// Each lane's corners (`[0; 4]` in a lane holding no tet).
+    corners: [[u32; 4]; LANES],
+    /// Whether each lane holds a tet.
+    filled: [bool; LANES],
+    /// Each corner's `g_k` (see the module's doc); zero in an empty lane.
+    gradients: [Vec3x4; 4],
+    /// Rest volumes (0 in an empty lane).
+    rest_volume: f32x4,
+    /// Each corner's inverse mass this step (0 in an empty lane).
+    inv_masses: [f32x4; 4],
+    /// `S = sum w_k g_k g_k^T` this step, as `[xx, yy, zz, xy, xz, yz]`.
+    gram: [f32x4; 6],
 }
 
-/// Each tet's `Dm^-1` (its rest edges from vertex 0 as columns, inverted); the identity for a
-/// degenerate tet, which the mesh does not hold.
-pub(crate) fn rest_inverses(positions: &[Vec3], tets: &[[u32; 4]]) -> Vec<Mat3> {
-    tets.iter()
-        .map(|t| {
-            let p = t.map(|i| positions[i as usize]);
-            let dm = Mat3::from_cols(p[1] - p[0], p[2] - p[0], p[3] - p[0]);
-            let inverse = dm.inverse();
-            if inverse.is_finite() {
-                inverse
-            } else {
-                Mat3::IDENTITY
+/// The mesh's tets in the bundles of [`Blocks::tet_bundles`], their inverse masses and Gram
+/// matrices left for [`SoftBodyState::refresh_shape_bundles`].
+///
+/// [`Blocks::tet_bundles`]: super::tet_mesh::Blocks::tet_bundles
+pub(crate) fn shape_bundles(mesh: &TetMesh) -> Vec<ShapeBundle> {
+    let x = mesh.positions();
+    let tets = mesh.tets();
+    // Bundles in index order: each takes the first tet not yet taken and the next ones (at
+    // most `LOOK_AHEAD` further) that share no vertex with it.
+    const LOOK_AHEAD: usize = 64;
+    let mut taken = vec![false; tets.len()];
+    let mut bundles: Vec<[Option<usize>; LANES]> = Vec::new();
+    for first in 0..tets.len() {
+        if taken[first] {
+            continue;
+        }
+        let mut bundle = [None; LANES];
+        let mut count = 0;
+        for t in first..tets.len().min(first + LOOK_AHEAD) {
+            if count == LANES {
+                break;
+            }
+            let shares =
+                |u: &Option<usize>| u.is_some_and(|u| tets[u].iter().any(|i| tets[t].contains(i)));
+            if !taken[t] && !bundle.iter().any(shares) {
+                bundle[count] = Some(t);
+                taken[t] = true;
+                count += 1;
+            }
+        }
+        bundles.push(bundle);
+    }
+    bundles
+        .into_iter()
+        .map(|bundle| {
+            let filled = bundle.map(|t| t.is_some());
+            let corners: [[u32; 4]; LANES] = bundle.map(|t| t.map_or([0; 4], |t| tets[t]));
+            let volumes: [f32; LANES] = bundle.map(|t| t.map_or(0.0, |t| mesh.rest_volumes()[t]));
+            let g: [[Vec3; 4]; LANES] = std::array::from_fn(|l| {
+                if !filled[l] {
+                    return [Vec3::ZERO; 4];
+                }
+                let p = corners[l].map(|i| x[i as usize]);
+                let dm = Mat3::from_cols(p[1] - p[0], p[2] - p[0], p[3] - p[0]);
+                // The mesh holds no degenerate tet; a broken inverse would only stop this one.
+                let inverse = dm.inverse();
+                let gt = if inverse.is_finite() {
+                    inverse.transpose()
+                } else {
+                    Mat3::ZERO
+                };
+                [
+                    -(gt.x_axis + gt.y_axis + gt.z_axis),
+                    gt.x_axis,
+                    gt.y_axis,
+                    gt.z_axis,
+                ]
+            });
+            ShapeBundle {
+                corners,
+                filled,
+                gradients: std::array::from_fn(|k| Vec3x4::from_vecs(g.map(|g| g[k]))),
+                rest_volume: f32x4::new(volumes),
+                inv_masses: [f32x4::ZERO; 4],
+                gram: [f32x4::ZERO; 6],
             }
         })
         .collect()
 }
 
-/// A symmetric 3x3 matrix by its six entries: `[xx, yy, zz, xy, xz, yz]`.
-#[derive(Clone, Copy, Debug, Default)]
-pub(crate) struct Sym3([f32; 6]);
-
-impl Sym3 {
-    /// `sum w_i g_i g_i^T` over a tet's corners: the Gram matrix a projection's `F` moves by.
-    fn gram(g: &[Vec3; 4], w: &[f32; 4]) -> Sym3 {
-        let mut s = [0.0; 6];
-        for (g, &w) in g.iter().zip(w) {
-            s[0] += w * g.x * g.x;
-            s[1] += w * g.y * g.y;
-            s[2] += w * g.z * g.z;
-            s[3] += w * g.x * g.y;
-            s[4] += w * g.x * g.z;
-            s[5] += w * g.y * g.z;
-        }
-        Sym3(s)
-    }
-
-    fn mat3(&self) -> Mat3 {
-        let [xx, yy, zz, xy, xz, yz] = self.0;
-        Mat3::from_cols(
-            Vec3::new(xx, xy, xz),
-            Vec3::new(xy, yy, yz),
-            Vec3::new(xz, yz, zz),
-        )
-    }
-}
-
-/// A tet's `g_i` (see the module's doc) from its `Dm^-1`.
-#[inline]
-fn corner_gradients(dm_inv: &Mat3) -> [Vec3; 4] {
-    let gt = dm_inv.transpose();
-    [
-        -(gt.x_axis + gt.y_axis + gt.z_axis),
-        gt.x_axis,
-        gt.y_axis,
-        gt.z_axis,
-    ]
-}
-
 impl SoftBodyState {
-    /// Each tet's Gram matrix `S` for this step's inverse masses (kinematic particles have none).
-    pub(crate) fn refresh_tet_grams(&mut self) {
+    /// Each bundle's inverse masses and Gram matrices for this step's inverse masses
+    /// (kinematic particles have none).
+    pub(crate) fn refresh_shape_bundles(&mut self) {
         let w = &self.inv_masses;
-        for ((gram, tet), dm_inv) in self
-            .tet_grams
-            .iter_mut()
-            .zip(self.mesh.tets())
-            .zip(&self.tet_rest_inverses)
-        {
-            let wt = tet.map(|i| w[i as usize]);
-            *gram = Sym3::gram(&corner_gradients(dm_inv), &wt);
+        for b in &mut self.shape_bundles {
+            b.inv_masses = std::array::from_fn(|k| {
+                f32x4::new(std::array::from_fn(|l| {
+                    if b.filled[l] {
+                        w[b.corners[l][k] as usize]
+                    } else {
+                        0.0
+                    }
+                }))
+            });
+            let mut s = [f32x4::ZERO; 6];
+            for (g, &w) in b.gradients.iter().zip(&b.inv_masses) {
+                let wg = g.scale(w);
+                s[0] += wg.x * g.x;
+                s[1] += wg.y * g.y;
+                s[2] += wg.z * g.z;
+                s[3] += wg.x * g.y;
+                s[4] += wg.x * g.z;
+                s[5] += wg.y * g.z;
+            }
+            b.gram = s;
         }
     }
 
-    /// One pass over the tets' shape constraints (see the module's doc), in index order: per
+    /// One pass over the tets' shape constraints (see the module's doc), bundle by bundle: per
     /// tet the five deviatoric ones in turn, then the hydrostatic one. `compliance` is theirs
     /// per unit volume (see [`ElasticSettings::tet_compliance`]), `hs2` the squared substep,
-    /// `gamma` XPBD's damping term. Each tet's
-    /// `Dm^-1` and Gram matrix are from `refresh_tet_grams`, this step.
+    /// `gamma` XPBD's damping term. Needs `refresh_shape_bundles` this step.
     pub(crate) fn project_tet_shapes(&mut self, compliance: [f32; 2], hs2: f32, gamma: f32) {
         let x = &mut self.positions;
         let start = &self.previews;
-        let w = &self.inv_masses;
-        for (((tet, &v0), dm_inv), gram) in self
-            .mesh
-            .tets()
-            .iter()
-            .zip(self.mesh.rest_volumes())
-            .zip(&self.tet_rest_inverses)
-            .zip(&self.tet_grams)
-        {
-            let corners = tet.map(|i| i as usize);
-            let wt = corners.map(|i| w[i]);
-            if wt == [0.0; 4] {
-                continue;
-            }
-            let deformation =
-                |p: [Vec3; 4]| Mat3::from_cols(p[1] - p[0], p[2] - p[0], p[3] - p[0]) * *dm_inv;
-            let mut f = deformation(corners.map(|i| x[i]));
-            let f_start = deformation(corners.map(|i| start[i].vec3()));
-            let s = gram.mat3();
+        let gamma = f32x4::splat(gamma);
+        let one_plus_gamma = f32x4::ONE + gamma;
+        let half = f32x4::splat(0.5);
+        for b in &self.shape_bundles {
+            let g = &b.gradients;
+            let corner = |k: usize| Vec3x4::from_vecs(b.corners.map(|t| x[t[k] as usize]));
+            let mut f = Mat3x4::deformation(&[corner(0), corner(1), corner(2), corner(3)], g);
+            let start_corner =
+                |k: usize| Vec3x4::gather_points(start, b.corners.map(|t| t[k] as usize));
+            let f_start = Mat3x4::deformation(
+                &[
+                    start_corner(0),
+                    start_corner(1),
+                    start_corner(2),
+                    start_corner(3),
+                ],
+                g,
+            );
+            // Each constraint's compliance over `h_s^2`; infinite in an empty lane, whose
+            // multipliers are then zero (and its corners have no mass).
+            let scaled = b.rest_volume * f32x4::splat(hs2);
+            let [deviatoric, hydrostatic] = compliance.map(|c| f32x4::splat(c) / scaled);
             // `total` is the sum of `lambda` times each constraint's gradient on `F`: the
-            // corners move by `w_i total g_i` at the end.
-            let mut total = Mat3::ZERO;
-            let mut project = |grad: Mat3, constraint: f32, f: &mut Mat3, compliance: f32| {
-                let gs = grad * s;
-                let denominator = frobenius(&gs, &grad);
-                let rate = frobenius(&grad, &(*f - f_start));
-                let lambda =
-                    -(constraint + gamma * rate) / ((1.0 + gamma) * denominator + compliance / hs2);
-                if lambda.is_finite() {
-                    total += grad * lambda;
-                    *f += gs * lambda;
-                }
+            // corners move by `w_k total g_k` at the end.
+            let mut total = Mat3x4::ZERO;
+            let mut project = |grad: Mat3x4, constraint: f32x4, f: &mut Mat3x4, alpha: f32x4| {
+                let gs = grad.mul_sym(&b.gram);
+                let denominator = gs.frobenius(&grad);
+                let rate = grad.frobenius(&f.sub(&f_start));
+                let lambda = -(constraint + gamma * rate) / (one_plus_gamma * denominator + alpha);
+                let lambda = lambda.is_finite().blend(lambda, f32x4::ZERO);
+                total.add_scaled(&grad, lambda);
+                f.add_scaled(&gs, lambda);
             };
-            let [deviatoric, hydrostatic] = compliance.map(|c| c / v0);
             for k in 0..5 {
-                let grad = deviatoric_gradient(&f, k);
+                let grad = f.deviatoric_gradient(k);
                 // `<B_k, E>` = `<F B_k, F> / 2` (`B_k` is traceless).
-                let constraint = 0.5 * frobenius(&grad, &f);
+                let constraint = half * grad.frobenius(&f);
                 project(grad, constraint, &mut f, deviatoric);
             }
-            let cofactor = Mat3::from_cols(
-                f.y_axis.cross(f.z_axis),
-                f.z_axis.cross(f.x_axis),
-                f.x_axis.cross(f.y_axis),
-            );
-            project(cofactor, f.determinant() - 1.0, &mut f, hydrostatic);
-            for ((&i, g), w) in corners.iter().zip(corner_gradients(dm_inv)).zip(wt) {
-                x[i] += total * g * w;
+            let cofactor = f.cofactor();
+            let det = f.0[0].dot(cofactor.0[0]);
+            project(cofactor, det - f32x4::ONE, &mut f, hydrostatic);
+            let moves: [[Vec3; LANES]; 4] =
+                std::array::from_fn(|k| total.mul_vec(g[k]).scale(b.inv_masses[k]).to_vecs());
+            for (l, (corners, _)) in (b.corners.iter().zip(b.filled))
+                .enumerate()
+                .filter(|(_, (_, filled))| *filled)
+            {
+                for (k, &i) in corners.iter().enumerate() {
+                    x[i as usize] += moves[k][l];
+                }
             }
         }
     }
@@ -217,6 +344,17 @@ mod tests {
 
     fn basis(k: usize) -> Mat3 {
         Mat3::from_cols_array_2d(&DEVIATORIC_BASIS[k])
+    }
+
+    fn frobenius(a: &Mat3, b: &Mat3) -> f32 {
+        a.x_axis.dot(b.x_axis) + a.y_axis.dot(b.y_axis) + a.z_axis.dot(b.z_axis)
+    }
+
+    /// `F B_k` as the projection computes it, in lane 0.
+    fn deviatoric_gradient(f: &Mat3, k: usize) -> Mat3 {
+        let lanes = Mat3x4([f.x_axis, f.y_axis, f.z_axis].map(Vec3x4::splat));
+        let [x, y, z] = lanes.deviatoric_gradient(k).0.map(|c| c.to_vecs()[0]);
+        Mat3::from_cols(x, y, z)
     }
 
     #[test]
@@ -256,7 +394,7 @@ mod tests {
         for (p, &x) in body.previews.iter_mut().zip(&body.positions) {
             *p = super::super::lanes::Point4::new(x);
         }
-        body.refresh_tet_grams();
+        body.refresh_shape_bundles();
         let before = body.volume_metrics().volume as f32;
         body.project_tet_shapes(compliance, 1e-4, 0.0);
         (body, before)
@@ -291,8 +429,11 @@ mod tests {
         let (body, _) = project_once(shear, [1e-6, f32::INFINITY]);
         assert!(momentum(&body, shear).length() < 1e-6);
         let f = |body: &SoftBodyState| {
-            let x = body.mesh.tets()[0].map(|i| body.positions[i as usize]);
-            Mat3::from_cols(x[1] - x[0], x[2] - x[0], x[3] - x[0]) * body.tet_rest_inverses[0]
+            let tet = body.mesh.tets()[0];
+            let [x, r] = [&body.positions, body.mesh.positions()]
+                .map(|p| tet.map(|i| p[i as usize]))
+                .map(|x| Mat3::from_cols(x[1] - x[0], x[2] - x[0], x[3] - x[0]));
+            x * r.inverse()
         };
         // |dev E|: about 0.02 / sqrt 2 for the shear.
         let deviatoric_strain = |f: Mat3| {

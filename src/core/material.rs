@@ -191,10 +191,10 @@ pub struct ElasticSettings {
     pub youngs_modulus: f32,
     /// Poisson's ratio `nu`, from 0 to 0.5: how much the shape solve itself resists a change
     /// of volume (at 0.5 it allows none, as a hard constraint). Jelly, flesh and rubber are
-    /// 0.49 to 0.5; the default is 0.495. The volume impulses keep the volume within their
-    /// tolerance whatever it is, but a landing is met by both: the lower it is, the more of a
-    /// landing's crush is left to the impulses (a 2 m jelly dropped from 3 m peaked at 0.8 %
-    /// with 0.495, 0.8-1.0 % with 0.49, 1.2-1.6 % with 0.25).
+    /// 0.49 to 0.5; the default is 0.499. With one projection per substep the shape solve
+    /// alone still loses a few percent on a landing, which the volume impulses take under
+    /// their tolerance; the lower the value, the more of a landing's crush is left to them
+    /// (PERFORMANCE.md, stop 32).
     pub poisson_ratio: f32,
     /// Stiffness-proportional damping `beta`, in seconds: the damping is `beta` times the
     /// stiffness, so a mode of angular frequency `w` has the damping ratio `beta w / 2` (fast,
@@ -225,8 +225,8 @@ impl ElasticSettings {
     /// The most substeps a step takes for the motion (see [`ElasticSettings::max_motion`]).
     pub const MAX_SUBSTEPS: u32 = 64;
 
-    /// The default Poisson's ratio, 0.495.
-    pub const DEFAULT_POISSON_RATIO: f32 = 0.495;
+    /// The default Poisson's ratio, 0.499.
+    pub const DEFAULT_POISSON_RATIO: f32 = 0.499;
 
     /// A material of Young's modulus `youngs_modulus` (Pa) and stiffness-proportional
     /// damping `damping` (s), with the default Poisson's ratio and substep.

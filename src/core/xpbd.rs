@@ -144,7 +144,7 @@ impl SoftBodyState {
             _ => None,
         };
         if tet_compliance.is_some() {
-            self.refresh_tet_grams();
+            self.refresh_shape_bundles();
         }
         for k in 0..substeps {
             // Predict; `previews` holds where each particle started the substep.
