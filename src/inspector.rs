@@ -208,6 +208,7 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
                     .logarithmic(true)
                     .text("Young's modulus (Pa)"),
             );
+            ui.add(egui::Slider::new(&mut e.poisson_ratio, 0.0..=0.5).text("Poisson's ratio"));
             ui.add(
                 egui::Slider::new(&mut e.damping, 0.0..=0.1)
                     .logarithmic(true)

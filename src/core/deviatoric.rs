@@ -159,6 +159,8 @@ const INV_SQRT_6: f32 = 0.408_248_3;
 pub(crate) struct ShapeBundle {
     /// Each lane's corners (`[0; 4]` in a lane holding no tet).
     corners: [[u32; 4]; LANES],
+    /// The same, by corner: `[k][l]` is corner `k` of lane `l`, for gathering into lanes.
+    lanes: [[usize; LANES]; 4],
     /// Whether each lane holds a tet.
     filled: [bool; LANES],
     /// Each corner's `g_k` (see the module's doc); zero in an empty lane.
@@ -231,6 +233,7 @@ pub(crate) fn shape_bundles(mesh: &TetMesh) -> Vec<ShapeBundle> {
             });
             ShapeBundle {
                 corners,
+                lanes: std::array::from_fn(|k| corners.map(|c| c[k] as usize)),
                 filled,
                 gradients: std::array::from_fn(|k| Vec3x4::from_vecs(g.map(|g| g[k]))),
                 rest_volume: f32x4::new(volumes),
@@ -282,16 +285,24 @@ impl SoftBodyState {
         let half = f32x4::splat(0.5);
         for b in &self.shape_bundles {
             let g = &b.gradients;
-            let corner = |k: usize| Vec3x4::from_vecs(b.corners.map(|t| x[t[k] as usize]));
-            let mut f = Mat3x4::deformation(&[corner(0), corner(1), corner(2), corner(3)], g);
-            let start_corner =
-                |k: usize| Vec3x4::gather_points(start, b.corners.map(|t| t[k] as usize));
+            // Written out, not mapped: a closure per lane was not inlined.
+            let corner = |[a, b, c, d]: [usize; LANES]| Vec3x4::from_vecs([x[a], x[b], x[c], x[d]]);
+            let start_corner = |[a, b, c, d]: [usize; LANES]| {
+                Vec3x4::from_rows([
+                    start[a].row(),
+                    start[b].row(),
+                    start[c].row(),
+                    start[d].row(),
+                ])
+            };
+            let [l0, l1, l2, l3] = b.lanes;
+            let mut f = Mat3x4::deformation(&[corner(l0), corner(l1), corner(l2), corner(l3)], g);
             let f_start = Mat3x4::deformation(
                 &[
-                    start_corner(0),
-                    start_corner(1),
-                    start_corner(2),
-                    start_corner(3),
+                    start_corner(l0),
+                    start_corner(l1),
+                    start_corner(l2),
+                    start_corner(l3),
                 ],
                 g,
             );
