@@ -149,18 +149,14 @@ impl Mat3x4 {
 
 const INV_SQRT_6: f32 = 0.408_248_3;
 
-/// [`LANES`] tets that share no vertex (one bundle of [`Blocks::tet_bundles`]), with what the
-/// shape projection reads of them in lanes: no projection of a bundle moves a particle another
-/// of its tets reads, so the four are projected at once and the result is that of projecting
-/// them one after another.
-///
-/// [`Blocks::tet_bundles`]: super::tet_mesh::Blocks::tet_bundles
+/// [`LANES`] tets that share no vertex, with what the shape projection reads of them in lanes:
+/// no projection of a bundle moves a particle another of its tets reads, so the four are
+/// projected at once and the result is that of projecting them one after another.
 #[derive(Clone, Copy, Debug)]
 pub(crate) struct ShapeBundle {
-    /// Each lane's corners (`[0; 4]` in a lane holding no tet).
-    corners: [[u32; 4]; LANES],
-    /// The same, by corner: `[k][l]` is corner `k` of lane `l`, for gathering into lanes.
-    lanes: [[usize; LANES]; 4],
+    /// The corners by corner and lane: `[k][l]` is corner `k` of lane `l` (0 in a lane holding
+    /// no tet).
+    corners: [[usize; LANES]; 4],
     /// Whether each lane holds a tet.
     filled: [bool; LANES],
     /// Each corner's `g_k` (see the module's doc); zero in an empty lane.
@@ -173,10 +169,8 @@ pub(crate) struct ShapeBundle {
     gram: [f32x4; 6],
 }
 
-/// The mesh's tets in the bundles of [`Blocks::tet_bundles`], their inverse masses and Gram
-/// matrices left for [`SoftBodyState::refresh_shape_bundles`].
-///
-/// [`Blocks::tet_bundles`]: super::tet_mesh::Blocks::tet_bundles
+/// The mesh's tets in bundles (see [`ShapeBundle`]), their inverse masses and Gram matrices
+/// left for [`SoftBodyState::refresh_shape_bundles`].
 pub(crate) fn shape_bundles(mesh: &TetMesh) -> Vec<ShapeBundle> {
     let x = mesh.positions();
     let tets = mesh.tets();
@@ -232,8 +226,7 @@ pub(crate) fn shape_bundles(mesh: &TetMesh) -> Vec<ShapeBundle> {
                 ]
             });
             ShapeBundle {
-                corners,
-                lanes: std::array::from_fn(|k| corners.map(|c| c[k] as usize)),
+                corners: std::array::from_fn(|k| corners.map(|c| c[k] as usize)),
                 filled,
                 gradients: std::array::from_fn(|k| Vec3x4::from_vecs(g.map(|g| g[k]))),
                 rest_volume: f32x4::new(volumes),
@@ -252,11 +245,7 @@ impl SoftBodyState {
         for b in &mut self.shape_bundles {
             b.inv_masses = std::array::from_fn(|k| {
                 f32x4::new(std::array::from_fn(|l| {
-                    if b.filled[l] {
-                        w[b.corners[l][k] as usize]
-                    } else {
-                        0.0
-                    }
+                    if b.filled[l] { w[b.corners[k][l]] } else { 0.0 }
                 }))
             });
             let mut s = [f32x4::ZERO; 6];
@@ -295,7 +284,7 @@ impl SoftBodyState {
                     start[d].row(),
                 ])
             };
-            let [l0, l1, l2, l3] = b.lanes;
+            let [l0, l1, l2, l3] = b.corners;
             let mut f = Mat3x4::deformation(&[corner(l0), corner(l1), corner(l2), corner(l3)], g);
             let f_start = Mat3x4::deformation(
                 &[
@@ -333,12 +322,9 @@ impl SoftBodyState {
             project(cofactor, det - f32x4::ONE, &mut f, hydrostatic);
             let moves: [[Vec3; LANES]; 4] =
                 std::array::from_fn(|k| total.mul_vec(g[k]).scale(b.inv_masses[k]).to_vecs());
-            for (l, (corners, _)) in (b.corners.iter().zip(b.filled))
-                .enumerate()
-                .filter(|(_, (_, filled))| *filled)
-            {
-                for (k, &i) in corners.iter().enumerate() {
-                    x[i as usize] += moves[k][l];
+            for (corners, moves) in b.corners.iter().zip(&moves) {
+                for ((&i, &dx), _) in corners.iter().zip(moves).zip(b.filled).filter(|(_, f)| *f) {
+                    x[i] += dx;
                 }
             }
         }
