@@ -484,3 +484,54 @@ impl SoftBodyMaterial {
         Ok(())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The elastic settings of a preset, changed by `change`.
+    fn elastic(change: impl Fn(&mut ElasticSettings)) -> SoftBodyMaterial {
+        let mut m = SoftBodyMaterial::RUBBER;
+        if let Elasticity::Elastic(e) = &mut m.elasticity {
+            change(e);
+        }
+        m
+    }
+
+    #[test]
+    fn the_presets_are_valid_and_bad_elastic_parameters_are_named_errors() {
+        for (name, preset) in SoftBodyMaterial::PRESETS {
+            assert_eq!(preset.validate(), Ok(()), "{name}");
+        }
+        let bad: [(&str, SoftBodyMaterial); 7] = [
+            ("poisson_ratio", elastic(|e| e.poisson_ratio = 0.6)),
+            ("poisson_ratio", elastic(|e| e.poisson_ratio = -0.1)),
+            ("poisson_ratio", elastic(|e| e.poisson_ratio = f32::NAN)),
+            ("youngs_modulus", elastic(|e| e.youngs_modulus = -1.0)),
+            (
+                "youngs_modulus",
+                elastic(|e| e.youngs_modulus = f32::INFINITY),
+            ),
+            ("damping", elastic(|e| e.damping = f32::NAN)),
+            ("max_substep", elastic(|e| e.max_substep = 0.0)),
+        ];
+        for (expected, material) in bad {
+            match material.validate() {
+                Err(MaterialError::BadParameter { name, .. }) => assert_eq!(name, expected),
+                other => panic!("{expected}: {other:?}"),
+            }
+        }
+        // The ends of the Poisson's ratio's range are materials: 0.5 is a hard hydrostatic
+        // constraint (zero compliance), 0 none.
+        for nu in [0.0, 0.5] {
+            let m = elastic(|e| e.poisson_ratio = nu);
+            assert_eq!(m.validate(), Ok(()));
+            if let Elasticity::Elastic(e) = m.elasticity {
+                let [deviatoric, hydrostatic] = e.tet_compliance();
+                assert!(deviatoric > 0.0 && deviatoric.is_finite());
+                assert!(hydrostatic >= 0.0 && hydrostatic.is_finite());
+                assert_eq!(hydrostatic == 0.0, nu == 0.5);
+            }
+        }
+    }
+}
