@@ -246,6 +246,9 @@ impl ElasticSettings {
     /// (the constraint does nothing); `nu` = 0.5 a zero hydrostatic one (a hard constraint).
     pub fn tet_compliance(&self) -> [f32; 2] {
         let (e, nu) = (self.youngs_modulus, self.poisson_ratio);
+        if e == 0.0 {
+            return [f32::INFINITY; 2];
+        }
         [(1.0 + nu) / e, 3.0 * (1.0 - 2.0 * nu) / e]
     }
 
@@ -531,6 +534,10 @@ mod tests {
                 assert!(deviatoric > 0.0 && deviatoric.is_finite());
                 assert!(hydrostatic >= 0.0 && hydrostatic.is_finite());
                 assert_eq!(hydrostatic == 0.0, nu == 0.5);
+            }
+            let limp = elastic(|e| (e.poisson_ratio, e.youngs_modulus) = (nu, 0.0));
+            if let Elasticity::Elastic(e) = limp.elasticity {
+                assert_eq!(e.tet_compliance(), [f32::INFINITY; 2]);
             }
         }
     }
