@@ -14,10 +14,10 @@
 //!
 //! A physical material's constraints are damped inside their projection, in XPBD's own form
 //! (Macklin et al. 2016, eq. 26): with stiffness-proportional damping `beta` the damping term of
-//! an edge is `gamma = beta / h_s`, the same for every edge, and the projection solves the
-//! spring and its damper together, implicitly. A separate pass of velocity dampers after the
-//! projection (what the paper's explicit springs keep) is unstable for stiff materials: a hard
-//! rubber cube on a graded mesh deformed in free fall and ran away (PERFORMANCE.md).
+//! a constraint is `gamma = beta / h_s`, the same for every constraint, and the projection
+//! solves the constraint and its damper together, implicitly. A separate pass of velocity
+//! dampers after the projection (what the paper's explicit springs keep) is unstable for stiff
+//! materials (PERFORMANCE.md, stop 31).
 //!
 //! Decisions: gravity is applied per substep (stored by `apply_forces`, which adds no spring
 //! forces for this method); kinematic particles move to their target in equal parts; a rigid
