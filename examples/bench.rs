@@ -37,7 +37,7 @@ use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
 use bevy::prelude::*;
 use bevy_soft_body::SoftBodyStepTime;
 use bevy_soft_body::core::{ImpulseSettings, VolumeMethod, XpbdSettings, box_grid};
-use bevy_soft_body::game_scenes::GameScene;
+use bevy_soft_body::game_scenes::{GameScene, GameShape};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
 
@@ -364,12 +364,18 @@ fn main() {
     }
     // The same 16 jellies for their first 3 s (the drop, the landing, the wobble) and for
     // 10 s (they settle and fall asleep: a resting body is not stepped).
-    for (name, steps) in [("jellies_16", 180), ("jellies_16_10s", 600)] {
+    // And 16 coarse ones (4 cells a side, 320 tets), the resolution a game gives a prop.
+    for (name, steps, cells) in [
+        ("jellies_16", 180, 8),
+        ("jellies_16_10s", 600, 8),
+        ("jellies_16_coarse", 180, 4),
+    ] {
         if !wanted(name) {
             continue;
         }
         let jelly = GameScene {
             lift: 0.3,
+            shape: GameShape::Cube { size: 0.5, cells },
             ..GameScene::standard()
                 .into_iter()
                 .find(|s| s.name == "jelly_cube_drop")

@@ -149,6 +149,13 @@ impl GameScene {
                 ("jelly", SoftBodyMaterial::JELLY),
                 3.0,
             ),
+            // The resolution a game gives a prop: 4 cells a side, 320 tets.
+            GameScene::new(
+                "jelly_cube_coarse",
+                cube(0.5, 4),
+                ("jelly", SoftBodyMaterial::JELLY),
+                0.3,
+            ),
             GameScene::new(
                 "jelly_sphere",
                 GameShape::Sphere {
