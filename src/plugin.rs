@@ -932,6 +932,16 @@ fn writeback(
 /// Steps without a runaway after which a body's next runaway is reported again.
 const RUNAWAY_REPORT_GAP_STEPS: u64 = 100;
 
+/// The compute task pool of this crate's unit tests: four threads, whichever test sets it up
+/// first (the pool is process-wide, and a headless app's `TaskPoolPlugin` keeps a pool that
+/// exists).
+#[cfg(test)]
+pub(crate) fn test_compute_pool() -> &'static bevy::tasks::ComputeTaskPool {
+    bevy::tasks::ComputeTaskPool::get_or_init(|| {
+        bevy::tasks::TaskPoolBuilder::new().num_threads(4).build()
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -952,10 +962,7 @@ mod tests {
 
     #[test]
     fn a_step_uses_no_more_threads_than_max_threads() {
-        // The only test of this binary that touches the pool, so it sets its size.
-        let pool = bevy::tasks::ComputeTaskPool::get_or_init(|| {
-            bevy::tasks::TaskPoolBuilder::new().num_threads(4).build()
-        });
+        let pool = test_compute_pool();
         assert_eq!(pool.thread_num(), 4);
         let limited = |max_threads| {
             ComputePool::new(&SoftBodyThreads {

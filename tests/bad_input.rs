@@ -3,7 +3,8 @@
 //! unbounded allocation; whatever they give must be valid.
 
 use bevy_soft_body::core::{
-    Resolution, parse_obj, parse_tetgen, tetrahedralize, uv_sphere, write_obj, write_tetgen,
+    ObjError, ObjErrorKind, Resolution, TetGenError, TetGenFile, parse_obj, parse_tetgen,
+    tetrahedralize, uv_sphere, write_obj, write_tetgen,
 };
 use glam::Vec3;
 
@@ -89,7 +90,7 @@ fn mutated_obj_files_never_panic() {
             }
             Err(e) => {
                 err += 1;
-                assert!(!e.to_string().is_empty());
+                assert_error_points_at_the_fault(&bytes, &e);
             }
         }
     }
@@ -121,13 +122,58 @@ fn mutated_tetgen_files_never_panic() {
                 ok += 1;
                 assert!(m.rest_volumes().iter().all(|&v| v > 0.0));
             }
-            Err(e) => {
+            Err(error) => {
                 err += 1;
-                assert!(!e.to_string().is_empty());
+                match &error {
+                    // The line exists in the file named.
+                    TetGenError::Syntax { file, line, .. } => {
+                        let text = match file {
+                            TetGenFile::Node => n,
+                            TetGenFile::Ele => e,
+                        };
+                        assert!(
+                            (1..=text.lines().count().max(1)).contains(line),
+                            "{error}: the {file} file has {} lines",
+                            text.lines().count()
+                        );
+                    }
+                    TetGenError::Truncated {
+                        expected, found, ..
+                    } => assert!(found < expected, "{error}"),
+                    TetGenError::Mesh(_) => {}
+                }
             }
         }
     }
     assert!(ok > 100 && err > 100, "ok {ok} err {err}");
+}
+
+/// An OBJ error names the line at fault and quotes what is wrong there; a file-wide one (line
+/// 0) is about the file as a whole.
+fn assert_error_points_at_the_fault(bytes: &[u8], error: &ObjError) {
+    let Ok(text) = std::str::from_utf8(bytes) else {
+        assert_eq!(error.kind, ObjErrorKind::NotText, "{error}");
+        return;
+    };
+    if error.line == 0 {
+        assert_eq!(error.kind, ObjErrorKind::NoFaces, "{error}");
+        return;
+    }
+    let line = text
+        .lines()
+        .nth(error.line - 1)
+        .unwrap_or_else(|| panic!("{error}: the file has {} lines", text.lines().count()));
+    match &error.kind {
+        ObjErrorKind::BadVertex(quoted)
+        | ObjErrorKind::NonFinite(quoted)
+        | ObjErrorKind::BadIndex(quoted) => {
+            assert!(line.contains(quoted.as_str()), "{error}: line `{line}`")
+        }
+        ObjErrorKind::ShortFace(_) | ObjErrorKind::IndexOutOfRange { .. } => {
+            assert!(line.trim_start().starts_with('f'), "{error}: line `{line}`")
+        }
+        ObjErrorKind::NotText | ObjErrorKind::NoFaces => panic!("{error} on line {}", error.line),
+    }
 }
 
 #[test]

@@ -12,6 +12,7 @@ pub mod lanes;
 pub mod material;
 pub mod obj;
 pub mod parallel;
+pub mod reference;
 pub mod roots;
 pub mod runaway;
 pub mod sleep;
