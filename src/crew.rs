@@ -6,11 +6,11 @@
 //! this was measured on, five times a step, with steps of a few hundred microseconds on two
 //! threads (16 bodies on two threads were 1.25-1.55 times faster than on one). So, as physics
 //! engines do with their worker threads, the plugin asks the pool's other threads to stay awake
-//! through a step: at its start ([`SoftBodySet::Prepare`](crate::SoftBodySet)) it spawns one
+//! through a step: at its start ([`SoftBodySystems::Prepare`](crate::SoftBodySystems)) it spawns one
 //! task per other thread, a crew member, that waits for work by spinning on the [`Board`]; the
 //! sections post their jobs there, the posting thread takes jobs too, and the members take the
 //! rest without waking anyone. At the end of the step
-//! ([`SoftBodySet::Integrate`](crate::SoftBodySet)) the crew is dismissed and its tasks end.
+//! ([`SoftBodySystems::Integrate`](crate::SoftBodySystems)) the crew is dismissed and its tasks end.
 //! Measured with `bench --only` on two threads, interleaved with the crew off
 //! (`--threads-sleep`): 16 bodies 0.42-0.53 ms a step against 0.50-0.59, the soft cube
 //! 0.47-0.48 against 0.53-0.58 (one thread: 0.81-0.86 and 0.83-0.88).

@@ -1,7 +1,7 @@
 //! Almost incompressible soft bodies for Bevy, after "Simulating Almost Incompressible
 //! Deformable Objects" (Diziol, Bayer, Bender 2009).
 //!
-//! Add [`SoftBodyPlugin`], spawn a [`SoftBody`] from a [`TetMesh`](core::TetMesh) and a
+//! Add [`SoftBodyPlugins`] (or just [`SoftBodyPlugin`]), spawn a [`SoftBody`] from a [`TetMesh`](core::TetMesh) and a
 //! [`SoftBodyMaterial`](core::SoftBodyMaterial), add a ground ([`StaticCollider::ground`]) and
 //! perhaps a few [`RigidSphere`]s. The simulation core in [`core`] has no ECS types and can be
 //! used on its own.
@@ -44,16 +44,24 @@ pub use components::{
     SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
 #[cfg(feature = "render")]
+#[allow(deprecated)]
+pub use loading::SoftBodyAssetSet;
+#[cfg(feature = "render")]
 pub use loading::{
-    ObjMeshLoader, SoftBodyAssetPlugin, SoftBodyAssetSet, SoftBodyFromAsset, SoftBodySource,
+    ObjMeshLoader, SoftBodyAssetPlugin, SoftBodyAssetSystems, SoftBodyFromAsset, SoftBodySource,
     TetGenLoader, TetMeshAsset,
 };
+#[allow(deprecated)]
+pub use plugin::SoftBodySet;
 pub use plugin::{
-    SoftBodyPlugin, SoftBodySet, SoftBodyStageTimes, SoftBodyStepTime, SoftBodyThreads,
-    SoftBodyTiming,
+    SoftBodyPlugin, SoftBodyPlugins, SoftBodyStageTimes, SoftBodyStepTime, SoftBodySystems,
+    SoftBodyThreads, SoftBodyTiming,
 };
 #[cfg(feature = "render")]
-pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSet, surface_mesh};
+#[allow(deprecated)]
+pub use surface::SoftBodySurfaceSet;
+#[cfg(feature = "render")]
+pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSystems, surface_mesh};
 
 /// Everything a game usually needs.
 pub mod prelude {
@@ -69,7 +77,7 @@ pub mod prelude {
     pub use crate::loading::{
         SoftBodyAssetPlugin, SoftBodyFromAsset, SoftBodySource, TetMeshAsset,
     };
-    pub use crate::plugin::{SoftBodyPlugin, SoftBodySet, SoftBodyThreads};
+    pub use crate::plugin::{SoftBodyPlugin, SoftBodyPlugins, SoftBodySystems, SoftBodyThreads};
     #[cfg(feature = "render")]
     pub use crate::surface::{SoftBodySurface, SoftBodySurfacePlugin};
 }

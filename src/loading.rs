@@ -180,7 +180,14 @@ impl SoftBodyFromAsset {
 
 /// System set of the asset-to-body builds, in [`Update`].
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct SoftBodyAssetSet;
+pub struct SoftBodyAssetSystems;
+
+/// The old name of [`SoftBodyAssetSystems`].
+#[deprecated(
+    since = "0.2.0",
+    note = "renamed `SoftBodyAssetSystems` (Bevy's naming of system sets)"
+)]
+pub type SoftBodyAssetSet = SoftBodyAssetSystems;
 
 /// Registers [`TetMeshAsset`] with its loader (and, by default, [`ObjMeshLoader`]) and builds
 /// [`SoftBodyFromAsset`]s. Needs the asset and mesh plugins (part of `DefaultPlugins`) and
@@ -200,7 +207,7 @@ impl Plugin for SoftBodyAssetPlugin {
     fn build(&self, app: &mut App) {
         app.init_asset::<TetMeshAsset>()
             .init_asset_loader::<TetGenLoader>()
-            .add_systems(Update, build_bodies.in_set(SoftBodyAssetSet));
+            .add_systems(Update, build_bodies.in_set(SoftBodyAssetSystems));
         if self.obj_loader {
             app.init_asset_loader::<ObjMeshLoader>();
         }

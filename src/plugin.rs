@@ -4,6 +4,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
+use bevy::app::PluginGroupBuilder;
 use bevy::ecs::batching::BatchingStrategy;
 use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
 use bevy::platform::time::Instant;
@@ -17,10 +18,17 @@ use crate::components::{
 use crate::core::{ColliderInstance, Parallel, RigidSphereState, Serial, SoftBodyState, TetMesh};
 use crate::crew;
 
+/// The old name of [`SoftBodySystems`].
+#[deprecated(
+    since = "0.2.0",
+    note = "renamed `SoftBodySystems` (Bevy's naming of system sets)"
+)]
+pub type SoftBodySet = SoftBodySystems;
+
 /// The stages of a step, run in this order in the plugin's schedule (see `core::body` for what
 /// each does and why in this order).
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub enum SoftBodySet {
+pub enum SoftBodySystems {
     /// Place new bodies, clear last step's counters, apply pinned and driven particles.
     Prepare,
     /// Gravity, the paper's springs with damping, baseline volume forces; the velocities of
@@ -40,6 +48,41 @@ pub enum SoftBodySet {
     Integrate,
     /// Metrics into [`SoftBodyStats`], transforms follow the bodies.
     Writeback,
+}
+
+/// The crate's plugins a game adds in one go: [`SoftBodyPlugin`] (the simulation), and with
+/// feature `render` [`SoftBodySurfacePlugin`](crate::SoftBodySurfacePlugin) (render meshes that
+/// follow the bodies) and [`SoftBodyAssetPlugin`](crate::SoftBodyAssetPlugin) (bodies from
+/// meshes and files; it needs Bevy's asset and mesh plugins, as in `DefaultPlugins`). Each part
+/// can be replaced or left out, as in any plugin group:
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::prelude::*;
+///
+/// // The simulation in `FixedPostUpdate`, at the game's fixed rate.
+/// let plugins = SoftBodyPlugins.set(SoftBodyPlugin::new(FixedPostUpdate));
+/// // A headless server has no meshes to draw or assets to build bodies from.
+/// #[cfg(feature = "render")]
+/// let plugins = plugins
+///     .disable::<SoftBodySurfacePlugin>()
+///     .disable::<SoftBodyAssetPlugin>();
+/// App::new().add_plugins((MinimalPlugins, plugins)).update();
+/// ```
+///
+/// The debug gizmos ([`SoftBodyDebugPlugin`](crate::debug::SoftBodyDebugPlugin)) and the
+/// inspector panel are not in the group: a game adds them while it needs them.
+pub struct SoftBodyPlugins;
+
+impl PluginGroup for SoftBodyPlugins {
+    fn build(self) -> PluginGroupBuilder {
+        let group = PluginGroupBuilder::start::<Self>().add(SoftBodyPlugin::default());
+        #[cfg(feature = "render")]
+        let group = group
+            .add(crate::SoftBodySurfacePlugin)
+            .add(crate::SoftBodyAssetPlugin::default());
+        group
+    }
 }
 
 /// Adds soft-body simulation to an app.
@@ -108,28 +151,28 @@ impl Plugin for SoftBodyPlugin {
         app.configure_sets(
             self.schedule,
             (
-                SoftBodySet::Prepare,
-                SoftBodySet::Forces,
-                SoftBodySet::Contacts,
-                SoftBodySet::OneRing,
-                SoftBodySet::PerTet,
-                SoftBodySet::Plasticity,
-                SoftBodySet::Integrate,
-                SoftBodySet::Writeback,
+                SoftBodySystems::Prepare,
+                SoftBodySystems::Forces,
+                SoftBodySystems::Contacts,
+                SoftBodySystems::OneRing,
+                SoftBodySystems::PerTet,
+                SoftBodySystems::Plasticity,
+                SoftBodySystems::Integrate,
+                SoftBodySystems::Writeback,
             )
                 .chain(),
         );
         app.add_systems(
             self.schedule,
             (
-                prepare.in_set(SoftBodySet::Prepare),
-                apply_forces.in_set(SoftBodySet::Forces),
-                resolve_contacts.in_set(SoftBodySet::Contacts),
-                one_ring.in_set(SoftBodySet::OneRing),
-                per_tet.in_set(SoftBodySet::PerTet),
-                plasticity.in_set(SoftBodySet::Plasticity),
-                integrate.in_set(SoftBodySet::Integrate),
-                writeback.in_set(SoftBodySet::Writeback),
+                prepare.in_set(SoftBodySystems::Prepare),
+                apply_forces.in_set(SoftBodySystems::Forces),
+                resolve_contacts.in_set(SoftBodySystems::Contacts),
+                one_ring.in_set(SoftBodySystems::OneRing),
+                per_tet.in_set(SoftBodySystems::PerTet),
+                plasticity.in_set(SoftBodySystems::Plasticity),
+                integrate.in_set(SoftBodySystems::Integrate),
+                writeback.in_set(SoftBodySystems::Writeback),
             ),
         );
     }
@@ -275,8 +318,8 @@ fn prepare(
 }
 
 /// The rigid spheres and static colliders as the solver sees them during one step, gathered
-/// once in [`SoftBodySet::Forces`]. The spheres are changed by the contact and volume passes
-/// (particles pressed against a sphere move it) and written back in [`SoftBodySet::Integrate`];
+/// once in [`SoftBodySystems::Forces`]. The spheres are changed by the contact and volume passes
+/// (particles pressed against a sphere move it) and written back in [`SoftBodySystems::Integrate`];
 /// the colliders do not move within a step. Also the bodies' entities, scratch for the parallel
 /// stages ([`for_each_body`]). The buffers are reused, so a step does not allocate.
 #[derive(Resource, Default)]
@@ -310,23 +353,23 @@ pub struct SoftBodyStepTime {
     current: Duration,
 }
 
-/// Milliseconds spent in each timed stage of the step (see [`SoftBodySet`]), all bodies
-/// together. [`SoftBodySet::Prepare`] and [`SoftBodySet::Writeback`] are outside the step
+/// Milliseconds spent in each timed stage of the step (see [`SoftBodySystems`]), all bodies
+/// together. [`SoftBodySystems::Prepare`] and [`SoftBodySystems::Writeback`] are outside the step
 /// and not timed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Reflect)]
 pub struct SoftBodyStageTimes {
-    /// [`SoftBodySet::Forces`].
+    /// [`SoftBodySystems::Forces`].
     pub forces_ms: f64,
-    /// [`SoftBodySet::Contacts`]: the first contact pass, and the substepped shape solves
+    /// [`SoftBodySystems::Contacts`]: the first contact pass, and the substepped shape solves
     /// (XPBD's whole step, a physical material's edges), which meet the contacts.
     pub contacts_ms: f64,
-    /// [`SoftBodySet::OneRing`]: the one-ring pass, with its clamp bounds.
+    /// [`SoftBodySystems::OneRing`]: the one-ring pass, with its clamp bounds.
     pub one_ring_ms: f64,
-    /// [`SoftBodySet::PerTet`].
+    /// [`SoftBodySystems::PerTet`].
     pub per_tet_ms: f64,
-    /// [`SoftBodySet::Plasticity`].
+    /// [`SoftBodySystems::Plasticity`].
     pub plasticity_ms: f64,
-    /// [`SoftBodySet::Integrate`]: the last contact pass and the positions.
+    /// [`SoftBodySystems::Integrate`]: the last contact pass and the positions.
     pub integrate_ms: f64,
 }
 

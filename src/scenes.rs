@@ -22,7 +22,7 @@ use crate::core::{
     Elasticity, Plasticity, Resolution, SoftBodyMaterial, TetMesh, TriangleSurface, VolumeMethod,
     box_grid, parse_obj, tetrahedralize,
 };
-use crate::plugin::{SoftBodyPlugin, SoftBodySet};
+use crate::plugin::{SoftBodyPlugin, SoftBodySystems};
 
 /// One of the paper's scenes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, Reflect)]
@@ -384,7 +384,7 @@ pub struct TwistDriver {
 pub struct RemoveAfter(pub f32);
 
 /// The systems that drive the scenes (the twist, the sphere taken away). Runs in
-/// [`FixedUpdate`] before [`SoftBodySet::Prepare`].
+/// [`FixedUpdate`] before [`SoftBodySystems::Prepare`].
 pub struct PaperScenesPlugin;
 
 impl Plugin for PaperScenesPlugin {
@@ -393,7 +393,7 @@ impl Plugin for PaperScenesPlugin {
             .register_type::<RemoveAfter>()
             .add_systems(
                 FixedUpdate,
-                (drive_twist, remove_after).before(SoftBodySet::Prepare),
+                (drive_twist, remove_after).before(SoftBodySystems::Prepare),
             );
     }
 }

@@ -75,7 +75,14 @@ pub fn surface_mesh(surface: &crate::core::TriangleSurface) -> Mesh {
 
 /// System set of the surface update, in [`PostUpdate`] before bounds are computed.
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct SoftBodySurfaceSet;
+pub struct SoftBodySurfaceSystems;
+
+/// The old name of [`SoftBodySurfaceSystems`].
+#[deprecated(
+    since = "0.2.0",
+    note = "renamed `SoftBodySurfaceSystems` (Bevy's naming of system sets)"
+)]
+pub type SoftBodySurfaceSet = SoftBodySurfaceSystems;
 
 /// Updates every [`SoftBodySurface`]. Needs the asset and mesh plugins (part of
 /// `DefaultPlugins`) and [`crate::SoftBodyPlugin`].
@@ -85,9 +92,9 @@ impl Plugin for SoftBodySurfacePlugin {
     fn build(&self, app: &mut App) {
         app.configure_sets(
             PostUpdate,
-            SoftBodySurfaceSet.before(VisibilitySystems::CalculateBounds),
+            SoftBodySurfaceSystems.before(VisibilitySystems::CalculateBounds),
         )
-        .add_systems(PostUpdate, deform_surfaces.in_set(SoftBodySurfaceSet));
+        .add_systems(PostUpdate, deform_surfaces.in_set(SoftBodySurfaceSystems));
     }
 }
 
