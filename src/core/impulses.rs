@@ -2054,7 +2054,7 @@ impl PassView<'_> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use std::sync::Arc;
 
     use glam::{UVec3, Vec3};
@@ -2079,7 +2079,7 @@ mod tests {
 
     /// A small cube with a deterministic jumble of velocities: strong enough that previewed
     /// tets are far from their rest volume, some below half of it.
-    fn shaken_body(strength: f32) -> SoftBodyState {
+    pub(crate) fn shaken_body(strength: f32) -> SoftBodyState {
         let mesh = Arc::new(box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO).unwrap());
         let material = SoftBodyMaterial::paper(1000.0, 1.0, 1.0);
         let mut body = SoftBodyState::new(mesh, material).unwrap();

@@ -403,14 +403,9 @@ impl SoftBodyState {
 
 #[cfg(test)]
 mod tests {
-    use std::sync::Arc;
-
-    use glam::UVec3;
-
     use super::*;
     use crate::components::SoftBody;
-    use crate::core::grid::box_grid;
-    use crate::core::material::SoftBodyMaterial;
+    use crate::core::impulses::tests::shaken_body;
     use crate::core::parallel::Serial;
     use crate::game_scenes::GameScene;
     use crate::scenes::{PaperScene, headless_scene_app};
@@ -493,25 +488,15 @@ mod tests {
         // A small cube with a jumble of velocities: previewed tets far from their rest volume,
         // some below half of it, so that the clamp works hard.
         for (strength, exact) in [(1.0, false), (3.0, false), (3.0, true)] {
-            let mesh = Arc::new(box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO).unwrap());
-            let mut material = SoftBodyMaterial::paper(1000.0, 1.0, 1.0);
+            let mut body = shaken_body(strength);
             if exact {
+                let mut material = *body.material();
                 material.method = VolumeMethod::Impulses(ImpulseSettings {
                     tolerance: 0.0,
                     ring_tet_tolerance: 0.0,
                     ..ImpulseSettings::PAPER
                 });
-            }
-            let mut body = SoftBodyState::new(mesh, material).unwrap();
-            let mut seed = 12345u64;
-            for v in body.velocities_mut() {
-                let mut next = || {
-                    seed = seed
-                        .wrapping_mul(6364136223846793005)
-                        .wrapping_add(1442695040888963407);
-                    ((seed >> 40) as f32) / ((1u64 << 24) as f32) * 2.0 - 1.0
-                };
-                *v = Vec3::new(next(), next(), next()) * strength;
+                body.set_material(material).unwrap();
             }
             check(
                 &format!("shaken {strength}, exact {exact}"),
