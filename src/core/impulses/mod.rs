@@ -1,0 +1,642 @@
+//! The paper's volume impulses (sections 4 and 5) and the neighbour clamp.
+//!
+//! Both passes work on previewed positions `xp = x + h v` and change velocities only, in
+//! Gauss-Seidel order: each impulse sees every impulse applied before it in the same pass.
+//!
+//! Directions. For a tet `t` with volume error `C_t = vol(xp) - V0_t`, the paper's impulse of
+//! magnitude `k` moves vertex `i` by `k * d_i` with `d_i = -h^2 w_i C_t grad_i`. Only the
+//! direction matters (the step length is solved for), so the common factor `h^2` is dropped.
+//! Because the gradients of a tet sum to zero, `sum m_i d_i = 0` among free particles, and so
+//! every impulse conserves momentum whatever its size.
+//!
+//! Decisions where the paper is silent:
+//! - Ring step limit: see [`RING_STEP_LIMIT`].
+//! - Which root: the smallest positive one reached while the volume moves monotonically towards
+//!   its target ([`monotone_root`]). The summed ring directions can point away from the ring's
+//!   target (its tets disagree), and then the cubic's positive roots lie past a turning point,
+//!   millions of times further than any sensible step: such a ring is left alone.
+//! - Tets and rings within `ImpulseSettings::tolerance` of their rest volume get no impulse; a
+//!   ring within it whose tets are each within `ImpulseSettings::ring_tet_tolerance` neither.
+//! - Cubic without such a root: no impulse (counted in [`StepCounters`]); the next step
+//!   tries again from new positions. Forcing a step there could only overshoot.
+//! - All directions zero (ring at rest volume, or all its particles kinematic): skipped.
+//! - A tet touched by an impulse that is already below `eps = V0 / 2` may lose at most
+//!   [`CLAMP_SLACK`] of its rest volume per impulse. Forbidding it to shrink at all (the first
+//!   rule tried) froze every impulse near a crushed region, including those that re-inflate it:
+//!   under a heavy sphere the soft cube then lost 38 % of its volume instead of under 2 %.
+//! - The per-tet correction is clamped at the step actually applied (`gamma * s*`), not at
+//!   `s*`: only what is applied can harm a neighbour.
+//!
+//! [`StepCounters`]: super::body::StepCounters
+
+use std::ops::Range;
+use std::sync::atomic::{AtomicU32, Ordering};
+
+use glam::Vec3;
+use wide::{CmpGe, CmpGt, CmpLe, CmpNe, f32x4};
+
+use super::body::{SoftBodyState, StepCounters};
+use super::contacts::RigidSphereState;
+use super::geometry::{
+    SIXTH, signed_volume, volume_gradients, volume_polynomial, volume_polynomial_lanes,
+};
+use super::lanes::{LANES, Point4, Vec3x4};
+use super::material::{ImpulseSettings, VolumeMethod};
+use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
+use super::roots::{Cubic, clear_of_zero, first_crossing, monotone_root};
+use super::tet_mesh::{Csr, TetMesh};
+
+mod bounds;
+mod clamp;
+mod ring;
+#[cfg(test)]
+pub(crate) mod tests;
+mod tet;
+
+use bounds::*;
+pub(crate) use bounds::{ClampBounds, ClampMotion, PassWorker};
+use ring::RingWork;
+
+/// What one impulse did.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ImpulseOutcome {
+    /// Nothing to do: no volume error, or no free particle to move.
+    Skipped,
+    /// The cubic had no positive root: nothing applied.
+    NoRoot,
+    /// The impulse was applied with this step length (after clamping and `gamma`).
+    Applied {
+        /// The step length `s` actually applied.
+        step: f64,
+        /// The root of the cubic: the step that restores the volume exactly.
+        root: f64,
+        /// Whether the neighbour clamp shortened it.
+        clamped: bool,
+    },
+}
+
+/// What a volume pass does with one task's row of items (vertices or tet bundles; see
+/// `SoftBodyState::run_blocks`), given the row's place in the flat list of items.
+type BlockImpulses<'a> = dyn Fn(&PassView, &mut PassWorker, &[u32], usize) + Sync + 'a;
+
+/// Which clamp regions a pass uses.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum ClampRegions {
+    /// One region per vertex: its one-ring and the tets bordering it.
+    Rings,
+    /// One region per tet: itself and the tets sharing a vertex with it.
+    Tets,
+}
+
+/// A ring's step is at most this multiple of the smallest per-tet step of its tets, the step
+/// `1 / sum_i w_i |grad_i|^2` at which a tet's own direction corrects that tet to first order.
+///
+/// Why: for an interior vertex the centre particle cannot change the volume of its ring (the
+/// ring is a star around it), so the ring's root is set by the outer particles alone, while the
+/// centre moves by the same step along the sum of its tets' directions. Where the ring's tets
+/// disagree (some compressed, some stretched), the root is many times the per-tet step (in the
+/// twisted bar: 1 to 3 times typically, over 100 times at worst) and the centre is thrown
+/// through its neighbours; without this limit the paper's ring pass diverged within a second
+/// in the twisted bar, clamp or no clamp. With it, the ring is corrected partly in such steps
+/// and fully again once its tets agree.
+pub const RING_STEP_LIMIT: f64 = 1.0;
+
+/// How much of its rest volume a tet that is already below `eps` may lose in one impulse.
+pub const CLAMP_SLACK: f32 = 0.1;
+
+/// Fraction of the rest volume below which the clamp does not let a touched tet go (`eps`).
+pub const CLAMP_FRACTION: f32 = 0.5;
+
+/// A tet at `eps`, up to this fraction of its rest volume above it, counts as below `eps`.
+/// An impulse the clamp stopped at a tet's floor leaves the tet there up to the rounding of its
+/// volume, which falls either side: by the rounding, the next impulse touching it was either
+/// frozen (at `eps` a tet may lose nothing) or given a crushed tet's [`CLAMP_SLACK`] (the
+/// reference passes, `reference.rs`, found it in the jelly cube's landing). Counted as below,
+/// as crushed as the clamp lets a tet be, it keeps the slack, which lets the impulses that
+/// re-inflate it go on (PERFORMANCE.md, stop 33).
+pub const CLAMP_ROUNDING: f32 = 1e-4;
+
+/// The least volume the neighbour clamp lets a tet of rest volume `v0`, now of `volume`, reach:
+/// `eps = V0 / 2`, or for a tet already below it (or at it, see [`CLAMP_ROUNDING`]), its volume
+/// less [`CLAMP_SLACK`] of its rest volume.
+#[inline]
+pub(crate) fn clamp_floor(volume: f32, v0: f32) -> f32 {
+    let eps = CLAMP_FRACTION * v0;
+    if volume >= eps + CLAMP_ROUNDING * v0 {
+        eps
+    } else {
+        volume - CLAMP_SLACK * v0
+    }
+}
+
+impl SoftBodyState {
+    /// Stage 3: one impulse per vertex restoring the volume of its one-ring (section 5).
+    /// Does nothing for the baseline or when the one-ring switch is off.
+    /// `spheres` are the rigid spheres of the last contact pass, in the same order: particles
+    /// pressed against one move it along.
+    pub fn one_ring_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
+        self.one_ring_pass_on(h, spheres, &Serial);
+    }
+
+    /// [`SoftBodyState::one_ring_pass`] with the mesh's blocks run by `parallel`: the same
+    /// result bit for bit on any number of threads (see [`super::parallel`]).
+    pub fn one_ring_pass_on(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        // A body stepped in substeps has its impulses in every substep (`shape_pass`).
+        if !self.material.is_substepped() {
+            self.one_ring_impulses(h, spheres, parallel);
+        }
+    }
+
+    /// The one-ring pass over a step (or substep) of `h`.
+    pub(crate) fn one_ring_impulses(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        let VolumeMethod::Impulses(settings) = self.material.method else {
+            return;
+        };
+        if !settings.one_ring {
+            return;
+        }
+        self.refresh_previews(h);
+        let regions = settings.neighbour_clamp.then_some(ClampRegions::Rings);
+        let mesh = self.mesh.clone();
+        // The per-tet pass, if it runs, goes on from this pass's clamp bounds.
+        self.clamp_bounds.keep_for_tets = settings.per_tet && settings.gamma != 0.0;
+        self.run_blocks(
+            h,
+            spheres,
+            parallel,
+            regions,
+            &mesh.blocks().vertices,
+            &|view, worker, centres, _| {
+                for &p in centres {
+                    let known = view.bounds.ring_checks
+                        && view.ring_known_within(worker, p as usize, &settings);
+                    if !known {
+                        view.ring_impulse(worker, p as usize, &settings);
+                    }
+                }
+            },
+        );
+    }
+
+    /// Stage 4: one impulse per tet towards its own rest volume, scaled by `gamma` (section 4,
+    /// end of section 5). Does nothing for the baseline or when the per-tet switch is off.
+    /// `spheres` as for [`SoftBodyState::one_ring_pass`].
+    pub fn per_tet_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
+        self.per_tet_pass_on(h, spheres, &Serial);
+    }
+
+    /// [`SoftBodyState::per_tet_pass`] with the mesh's blocks run by `parallel`, as
+    /// [`SoftBodyState::one_ring_pass_on`].
+    pub fn per_tet_pass_on(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        if !self.material.is_substepped() {
+            self.per_tet_impulses(h, spheres, parallel);
+        }
+    }
+
+    /// The per-tet pass over a step (or substep) of `h`.
+    pub(crate) fn per_tet_impulses(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        let VolumeMethod::Impulses(settings) = self.material.method else {
+            return;
+        };
+        if !settings.per_tet || settings.gamma == 0.0 {
+            return;
+        }
+        self.refresh_previews(h);
+        let regions = settings.neighbour_clamp.then_some(ClampRegions::Tets);
+        let mesh = self.mesh.clone();
+        self.run_blocks(
+            h,
+            spheres,
+            parallel,
+            regions,
+            &mesh.blocks().tet_bundles,
+            &|view, worker, bundles, first| {
+                let blocks = mesh.blocks();
+                for (k, bundle) in bundles.chunks(LANES).enumerate() {
+                    let at = first + LANES * k..first + LANES * k + bundle.len();
+                    let corners = &blocks.bundle_corners[at.clone()];
+                    let rest = &blocks.bundle_rest_volumes[at];
+                    view.tet_bundle(worker, bundle, corners, rest, &settings);
+                }
+            },
+        );
+    }
+
+    /// Runs `impulse` on each task's row of `items` (the mesh's [`Blocks`]' vertices or tet
+    /// bundles; with the row's place in the flat list of items), which it works through in
+    /// order, with the result of running the tasks one after another (see
+    /// [`super::parallel`]): the threads of `parallel` take tasks in order as they come free,
+    /// each waiting for the earlier tasks it shares particles with. A thread only ever waits
+    /// for tasks a running thread has already taken, so any number of threads, one included,
+    /// finishes. Then adds up the tasks' counters and sphere velocity
+    /// changes in task order.
+    ///
+    /// [`Blocks`]: super::tet_mesh::Blocks
+    fn run_blocks(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+        clamp_regions: Option<ClampRegions>,
+        items: &Csr,
+        impulse: &BlockImpulses<'_>,
+    ) {
+        for worker in &mut self.pass_workers {
+            worker.counters = StepCounters::default();
+            worker.max_moved = 0.0;
+            worker.sphere_dv.clear();
+            worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        }
+        let clamp_regions = clamp_regions.filter(|_| !self.clamp_bounds.disabled);
+        let take_tet_regions =
+            clamp_regions == Some(ClampRegions::Tets) || self.clamp_bounds.keep_for_tets;
+        self.clamp_bounds.keep_for_tets = false;
+        // A per-tet pass after its step's one-ring pass goes on from the bounds that pass took
+        // (they hold as long as drifts are measured from where they were taken): it only
+        // measures each particle's drift again. Taking them costs about as much as the
+        // per-tet pass's impulses in the soft cube. A one-ring pass goes on from an earlier
+        // step's while the body has hardly moved since (see `CARRY_DRIFT`).
+        // Whether the body is quiet (see `QUIET_DRIFT`), known only when a one-ring pass checks
+        // whether it can go on from earlier bounds.
+        let mut quiet_body = false;
+        let carry = match clamp_regions {
+            Some(ClampRegions::Tets) => self.clamp_bounds.taken_this_step,
+            Some(ClampRegions::Rings) => {
+                if self.clamp_bounds.kept {
+                    self.clamp_bounds.follow_translation(&self.previews);
+                }
+                let (carry, quiet) = self
+                    .clamp_bounds
+                    .still_hold(take_tet_regions, &self.previews);
+                quiet_body = quiet as f32 >= QUIET_SHARE * self.previews.len() as f32;
+                carry
+            }
+            None => false,
+        };
+        // A one-ring pass going on from earlier bounds knows most rings of a body at rest to be
+        // within their tolerances (see `RingCheckBound`); the first such pass computes what it
+        // needs from the bounds' start, in the bounds' first two phases.
+        let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
+        let shapes = ring_checks && !self.clamp_bounds.ring_checks_ready;
+        let blocks = self.mesh.blocks();
+        if clamp_regions.is_some() {
+            self.clamp_bounds
+                .reserve(&self.mesh, blocks.count(), &mut self.clamp_motion);
+            self.clamp_bounds.active = true;
+            self.clamp_motion.next_pass();
+        }
+        {
+            let mesh = &*self.mesh;
+            let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
+            let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
+            let any_touching = !self.touching.is_empty();
+            let mut bounds = self
+                .clamp_bounds
+                .view(clamp_regions.unwrap_or(ClampRegions::Rings));
+            bounds.ring_checks = ring_checks;
+            let velocities = SharedSlice::new(&mut self.velocities);
+            let previews = SharedSlice::new(&mut self.previews);
+            let scratch = SharedSlice::new(&mut self.scratch);
+            let drift = SharedSlice::new(&mut self.clamp_motion.drift);
+            let move_len = SharedSlice::new(&mut self.clamp_motion.move_len);
+            let walks = WalkMarks {
+                walked: &self.clamp_motion.walked.0,
+                walks: &self.clamp_motion.walks.0,
+            };
+            let block_drift = SharedSlice::new(&mut self.clamp_motion.block_drift);
+            let ring_corrected = SharedSlice::new(&mut self.ring_corrected);
+            let far = FarDrift {
+                marks: &self.clamp_motion.far_nearby.0,
+                pass: self.clamp_motion.pass_number,
+            };
+            let workers = SharedSlice::new(&mut self.pass_workers);
+            let waits_for = &mesh.blocks().waits_for;
+            let count = items.len();
+            // The clamp bounds are computed first, in chunks: the tets', then the vertices'
+            // (which need all tets'), then the regions' (which need all vertices'): the rings'
+            // for a one-ring pass, the tets' for a per-tet pass or to keep; threads that join
+            // late (waking one takes longer than a chunk) find the work going. A pass going on
+            // from bounds taken earlier only measures the drifts, block by block.
+            let (n, tet_count) = (mesh.vertex_count(), mesh.tet_count());
+            let fresh = clamp_regions.is_some() && !carry;
+            let chunks = |items: usize| {
+                if fresh {
+                    items.div_ceil(BOUNDS_CHUNK)
+                } else {
+                    0
+                }
+            };
+            let ring_chunks = match clamp_regions {
+                Some(ClampRegions::Rings) => chunks(n),
+                _ => 0,
+            };
+            let tet_chunks = if take_tet_regions {
+                chunks(tet_count)
+            } else {
+                0
+            };
+            let chunk_phase = |tasks: usize| Phase { tasks, order: None };
+            let shape_chunks = |items: usize| {
+                if shapes {
+                    items.div_ceil(BOUNDS_CHUNK)
+                } else {
+                    0
+                }
+            };
+            let phases = [
+                chunk_phase(chunks(tet_count) + shape_chunks(tet_count)),
+                chunk_phase(chunks(n) + shape_chunks(n)),
+                chunk_phase(if carry {
+                    count
+                } else {
+                    ring_chunks + tet_chunks
+                }),
+                Phase {
+                    tasks: count,
+                    order: Some((waits_for, &self.block_done[..count])),
+                },
+            ];
+            run_phases(parallel, &phases, &|phase, task| {
+                let range =
+                    |items: usize| BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(items);
+                match phase {
+                    0 if shapes => bounds.compute_tet_shapes(mesh, range(tet_count)),
+                    0 => bounds.compute_tets(mesh, previews, range(tet_count)),
+                    1 if shapes => bounds.compute_ring_checks(mesh, range(n)),
+                    1 => bounds.compute_vertices(mesh, previews, drift, range(n)),
+                    2 if carry => {
+                        let vertices = blocks.vertices.row(task);
+                        let largest = bounds.carry_drift(mesh, previews, drift, far, vertices);
+                        block_drift.set(task, largest);
+                    }
+                    2 => {
+                        if task < ring_chunks {
+                            bounds.compute_regions(mesh, ClampRegions::Rings, range(n));
+                        } else {
+                            let task = task - ring_chunks;
+                            let range =
+                                BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(tet_count);
+                            bounds.compute_regions(mesh, ClampRegions::Tets, range);
+                        }
+                    }
+                    _ => {
+                        let view = PassView {
+                            mesh,
+                            h,
+                            inv_masses,
+                            contact_normals,
+                            contact_kept,
+                            contact_sphere,
+                            any_touching,
+                            bounds,
+                            velocities,
+                            previews,
+                            scratch,
+                            drift,
+                            move_len,
+                            walks,
+                            far,
+                            ring_corrected,
+                        };
+                        // The particles this task reads were last moved by the tasks it
+                        // waits for (done by now): their largest drift bounds those
+                        // particles' drift; going on from earlier bounds, so does the largest
+                        // drift at the start in this block and its neighbours (a block's
+                        // impulses read no further).
+                        let mut start_drift = 0.0f32;
+                        if carry {
+                            start_drift = block_drift.get(task);
+                            for &near in blocks.neighbours.row(task) {
+                                start_drift = larger(start_drift, block_drift.get(near as usize));
+                            }
+                        }
+                        for &earlier in waits_for.row(task) {
+                            // Safety: that task is done; nothing writes its worker now.
+                            let moved = unsafe { workers.get_mut(earlier as usize) }.max_moved;
+                            start_drift = larger(start_drift, moved);
+                        }
+                        // Safety: each task is run by one thread only.
+                        let worker = unsafe { workers.get_mut(task) };
+                        worker.max_moved = start_drift;
+                        impulse(&view, worker, items.row(task), items.range(task).start);
+                    }
+                }
+            });
+        }
+        self.clamp_bounds.active = false;
+        let bounds = &mut self.clamp_bounds;
+        match (clamp_regions, carry) {
+            (Some(ClampRegions::Rings), false) => {
+                bounds.taken_this_step = take_tet_regions;
+                (bounds.kept, bounds.kept_tet_regions) = (true, take_tet_regions);
+                bounds.ring_checks_ready = false;
+            }
+            (Some(ClampRegions::Rings), true) => {
+                bounds.taken_this_step = bounds.kept_tet_regions;
+                bounds.carried_passes = bounds.carried_passes.saturating_add(1);
+                // Only a pass that computed the rings' checks makes them ready: a carried pass
+                // in a body not quiet enough computes none, and the next quiet one must.
+                bounds.ring_checks_ready |= shapes;
+            }
+            // Taken by a per-tet pass, without the rings' regions.
+            (Some(ClampRegions::Tets), false) => {
+                bounds.taken_this_step = true;
+                bounds.kept = false;
+                bounds.ring_checks_ready = false;
+            }
+            _ => {}
+        }
+        let c = &mut self.counters;
+        for worker in &self.pass_workers {
+            let w = &worker.counters;
+            c.rings_corrected += w.rings_corrected;
+            c.rings_without_root += w.rings_without_root;
+            c.rings_clamped += w.rings_clamped;
+            c.tets_without_root += w.tets_without_root;
+            c.tets_clamped += w.tets_clamped;
+            c.clamps_skipped += w.clamps_skipped;
+            c.ring_checks_skipped += w.ring_checks_skipped;
+            for (sphere, dv) in spheres.iter_mut().zip(&worker.sphere_dv) {
+                sphere.velocity += *dv;
+            }
+        }
+    }
+
+    /// The one-ring impulse of vertex `p` alone, outside a pass (no clamp bounds). Needs
+    /// `refresh_previews` first.
+    #[cfg(test)]
+    pub(crate) fn ring_impulse(
+        &mut self,
+        _mesh: &TetMesh,
+        p: usize,
+        h: f32,
+        settings: &ImpulseSettings,
+        spheres: &mut [RigidSphereState],
+    ) -> ImpulseOutcome {
+        let mut worker = PassWorker::for_mesh(&self.mesh);
+        worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        let outcome = self.single_view(h).ring_impulse(&mut worker, p, settings);
+        self.finish_single(worker, spheres);
+        outcome
+    }
+
+    /// The per-tet impulse of tet `t` alone, outside a pass (no clamp bounds). Needs
+    /// `refresh_previews` first.
+    #[cfg(test)]
+    pub(crate) fn tet_impulse(
+        &mut self,
+        _mesh: &TetMesh,
+        t: usize,
+        h: f32,
+        settings: &ImpulseSettings,
+        spheres: &mut [RigidSphereState],
+    ) -> ImpulseOutcome {
+        let mut worker = PassWorker::for_mesh(&self.mesh);
+        worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        let (corners, rest) = (self.mesh.tets()[t], self.mesh.rest_volumes()[t]);
+        let [outcome, ..] =
+            self.single_view(h)
+                .tet_bundle(&mut worker, &[t as u32], &[corners], &[rest], settings);
+        self.finish_single(worker, spheres);
+        outcome
+    }
+
+    #[cfg(test)]
+    fn finish_single(&mut self, worker: PassWorker, spheres: &mut [RigidSphereState]) {
+        self.counters = worker.counters;
+        for (sphere, dv) in spheres.iter_mut().zip(&worker.sphere_dv) {
+            sphere.velocity += *dv;
+        }
+    }
+
+    #[cfg(test)]
+    fn single_view(&mut self, h: f32) -> PassView<'_> {
+        self.clamp_motion.drift.resize(self.previews.len(), 0.0);
+        self.clamp_motion.move_len.resize(self.previews.len(), 0.0);
+        let tets = self.mesh.tet_count();
+        self.clamp_motion
+            .walked
+            .0
+            .resize_with(tets, || AtomicU32::new(0));
+        PassView {
+            mesh: &self.mesh,
+            h,
+            inv_masses: &self.inv_masses,
+            contact_normals: &self.contact_normals,
+            contact_kept: &self.contact_kept,
+            contact_sphere: &self.contact_sphere,
+            any_touching: !self.touching.is_empty(),
+            bounds: self.clamp_bounds.view(ClampRegions::Rings),
+            velocities: SharedSlice::new(&mut self.velocities),
+            previews: SharedSlice::new(&mut self.previews),
+            scratch: SharedSlice::new(&mut self.scratch),
+            drift: SharedSlice::new(&mut self.clamp_motion.drift),
+            move_len: SharedSlice::new(&mut self.clamp_motion.move_len),
+            walks: WalkMarks {
+                walked: &self.clamp_motion.walked.0,
+                walks: &self.clamp_motion.walks.0,
+            },
+            far: FarDrift {
+                marks: &self.clamp_motion.far_nearby.0,
+                pass: self.clamp_motion.pass_number,
+            },
+            ring_corrected: SharedSlice::new(&mut self.ring_corrected),
+        }
+    }
+}
+
+/// What the jobs of a pass share: the body's read-only data, and the arrays they write, each
+/// element by one job at a time (see [`super::parallel`]).
+pub(crate) struct PassView<'a> {
+    mesh: &'a TetMesh,
+    h: f32,
+    inv_masses: &'a [f32],
+    contact_normals: &'a [Vec3],
+    contact_kept: &'a [f32],
+    contact_sphere: &'a [u32],
+    any_touching: bool,
+    bounds: BoundsView<'a>,
+    velocities: SharedSlice<'a, Vec3>,
+    /// Previewed positions `x + h v`, kept up to date with every velocity change.
+    previews: SharedSlice<'a, Point4>,
+    /// Impulse directions by particle, for the clamp walk (zero outside a walk).
+    scratch: SharedSlice<'a, Vec3>,
+    drift: SharedSlice<'a, f32>,
+    move_len: SharedSlice<'a, f32>,
+    walks: WalkMarks<'a>,
+    far: FarDrift<'a>,
+    /// Per vertex, whether its ring was past its tolerance when last checked (see
+    /// [`SoftBodyState::ring_corrected`]); read and written by that ring's impulse only.
+    ring_corrected: SharedSlice<'a, bool>,
+}
+
+impl PassView<'_> {
+    #[inline(always)]
+    fn preview(&self, i: u32) -> Vec3 {
+        self.previews.get(i as usize).vec3()
+    }
+
+    /// `d` with its push into what particle `i` touches reduced to the part the particle keeps:
+    /// a volume impulse cannot move a particle into the ground at all, and moves a particle
+    /// pressed against a heavy sphere only as far as the pair moves together. The cubic is then
+    /// solved for the motion the particle can make, so the last contact pass does not undo it.
+    #[inline]
+    fn constrain_direction(&self, i: usize, d: Vec3) -> Vec3 {
+        let n = self.contact_normals[i];
+        let into = d.dot(n);
+        if into < 0.0 {
+            d - n * (into * (1.0 - self.contact_kept[i]))
+        } else {
+            d
+        }
+    }
+
+    /// Adds `dv` to particle `i`'s velocity; if `i` is pressed against a sphere and `dv` pushes
+    /// into it, the sphere moves along with the particle (the push was already reduced to the
+    /// pair's share by `constrain_direction`), so momentum is conserved.
+    #[inline(always)]
+    fn apply_velocity_change(&self, worker: &mut PassWorker, i: usize, dv: Vec3) {
+        self.velocities.set(i, self.velocities.get(i) + dv);
+        let preview = self.previews.get(i).vec3() + self.h * dv;
+        self.previews.set(i, Point4::new(preview));
+        if self.bounds.active {
+            let drift = (preview - self.bounds.start.get(i)).length();
+            if !self.bounds.is_far(i, drift) {
+                worker.max_moved = larger(worker.max_moved, drift);
+            } else if !self.bounds.is_far(i, self.drift.get(i)) {
+                self.far.mark(self.mesh, i);
+            }
+            self.drift.set(i, drift);
+        }
+        let k = self.contact_sphere[i];
+        if k != u32::MAX
+            && let Some(sphere_dv) = worker.sphere_dv.get_mut(k as usize)
+        {
+            let n = self.contact_normals[i];
+            let into = dv.dot(n);
+            if into < 0.0 {
+                *sphere_dv += n * into;
+            }
+        }
+    }
+}
