@@ -1,6 +1,7 @@
 //! The simulation core: plain Rust on glam, no ECS types. Data lives in flat arrays indexed by
 //! particle, tet and edge; a step allocates nothing.
 
+pub mod blocks;
 pub mod body;
 pub mod contacts;
 pub mod deviatoric;
