@@ -1,0 +1,191 @@
+//! [`SoftBodyPlugin`]: the systems that step every soft body, in ordered sets that mirror the
+//! stages of a step, so that a game can put its own systems between them.
+
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Duration;
+
+use bevy::app::PluginGroupBuilder;
+use bevy::ecs::batching::BatchingStrategy;
+use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
+use bevy::platform::time::Instant;
+use bevy::prelude::*;
+use parry3d::math::Pose;
+
+use crate::components::{
+    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
+    SoftBodyGravity, SoftBodyStats, StaticCollider,
+};
+use crate::core::{ColliderInstance, Parallel, RigidSphereState, Serial, SoftBodyState, TetMesh};
+use crate::crew;
+
+mod systems;
+mod threads;
+mod timing;
+
+pub use systems::SolverSpheres;
+use systems::*;
+#[cfg(test)]
+pub(crate) use threads::test_compute_pool;
+use threads::*;
+pub use threads::{PARALLEL_PASS_MIN_TETS, SoftBodyThreads};
+pub use timing::{SoftBodyStageTimes, SoftBodyStepTime};
+
+/// The old name of [`SoftBodySystems`].
+#[deprecated(
+    since = "0.2.0",
+    note = "renamed `SoftBodySystems` (Bevy's naming of system sets)"
+)]
+pub type SoftBodySet = SoftBodySystems;
+
+/// The stages of a step, run in this order in the plugin's schedule (see `core::body` for what
+/// each does and why in this order).
+#[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum SoftBodySystems {
+    /// Place new bodies, clear last step's counters, apply pinned and driven particles.
+    Prepare,
+    /// Gravity, the paper's springs with damping, baseline volume forces; the velocities of
+    /// spheres.
+    Forces,
+    /// Contacts on the previewed positions, so the volume passes see them; a shape solved in
+    /// substeps (a physical material's edges, XPBD's whole step) is solved here, meeting the
+    /// contacts in each substep.
+    Contacts,
+    /// The one-ring volume impulses.
+    OneRing,
+    /// The per-tet correction scaled by gamma.
+    PerTet,
+    /// Plastic springs.
+    Plasticity,
+    /// A last contact pass, then `x += h v` for particles and spheres.
+    Integrate,
+    /// Metrics into [`SoftBodyStats`], transforms follow the bodies.
+    Writeback,
+}
+
+/// The crate's plugins a game adds in one go: [`SoftBodyPlugin`] (the simulation), and with
+/// feature `render` [`SoftBodySurfacePlugin`](crate::SoftBodySurfacePlugin) (render meshes that
+/// follow the bodies) and [`SoftBodyAssetPlugin`](crate::SoftBodyAssetPlugin) (bodies from
+/// meshes and files; it needs Bevy's asset and mesh plugins, as in `DefaultPlugins`). Each part
+/// can be replaced or left out, as in any plugin group:
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::prelude::*;
+///
+/// // The simulation in `FixedPostUpdate`, at the game's fixed rate.
+/// let plugins = SoftBodyPlugins.set(SoftBodyPlugin::new(FixedPostUpdate));
+/// // A headless server has no meshes to draw or assets to build bodies from.
+/// #[cfg(feature = "render")]
+/// let plugins = plugins
+///     .disable::<SoftBodySurfacePlugin>()
+///     .disable::<SoftBodyAssetPlugin>();
+/// App::new().add_plugins((MinimalPlugins, plugins)).update();
+/// ```
+///
+/// The debug gizmos ([`SoftBodyDebugPlugin`](crate::debug::SoftBodyDebugPlugin)) and the
+/// inspector panel are not in the group: a game adds them while it needs them.
+pub struct SoftBodyPlugins;
+
+impl PluginGroup for SoftBodyPlugins {
+    fn build(self) -> PluginGroupBuilder {
+        let group = PluginGroupBuilder::start::<Self>().add(SoftBodyPlugin::default());
+        #[cfg(feature = "render")]
+        let group = group
+            .add(crate::SoftBodySurfacePlugin)
+            .add(crate::SoftBodyAssetPlugin::default());
+        group
+    }
+}
+
+/// Adds soft-body simulation to an app.
+///
+/// By default the simulation runs in [`FixedUpdate`] and sets the fixed time step to the
+/// paper's 10 ms; each run of the schedule is one step of `Time::delta` (the fixed step there).
+/// Gravity is the [`SoftBodyGravity`] resource.
+pub struct SoftBodyPlugin {
+    /// The schedule the stages run in.
+    pub schedule: InternedScheduleLabel,
+    /// If set and the schedule is [`FixedUpdate`], the fixed time step to use. `None` leaves
+    /// `Time<Fixed>` as the game configured it.
+    pub time_step: Option<Duration>,
+}
+
+impl Default for SoftBodyPlugin {
+    fn default() -> Self {
+        SoftBodyPlugin {
+            schedule: FixedUpdate.intern(),
+            time_step: Some(Duration::from_millis(10)),
+        }
+    }
+}
+
+impl SoftBodyPlugin {
+    /// Runs the stages in `schedule` instead of [`FixedUpdate`].
+    pub fn new(schedule: impl ScheduleLabel) -> Self {
+        SoftBodyPlugin {
+            schedule: schedule.intern(),
+            time_step: None,
+        }
+    }
+}
+
+/// How the plugin was set up, for systems outside the step (the render surfaces).
+#[derive(Resource, Clone, Copy, Debug)]
+pub struct SoftBodyTiming {
+    /// Whether the steps run in [`FixedUpdate`], so that frames fall between steps and are
+    /// drawn interpolated.
+    pub fixed: bool,
+}
+
+impl Plugin for SoftBodyPlugin {
+    fn build(&self, app: &mut App) {
+        app.insert_resource(SoftBodyTiming {
+            fixed: self.schedule == FixedUpdate.intern(),
+        });
+        app.init_resource::<SoftBodyGravity>()
+            .register_type::<SoftBodyGravity>()
+            .register_type::<SoftBodyStats>()
+            .register_type::<PinnedParticles>()
+            .register_type::<DrivenParticles>()
+            .register_type::<RigidSphere>()
+            .init_resource::<SolverSpheres>()
+            .init_resource::<SoftBodyStepTime>()
+            .init_resource::<SoftBodyThreads>()
+            .register_type::<SoftBodyThreads>()
+            .register_type::<SoftBodyStepTime>()
+            .register_type::<SoftBodyStageTimes>()
+            .add_message::<SoftBodyError>();
+        if let Some(step) = self.time_step
+            && self.schedule == FixedUpdate.intern()
+        {
+            app.insert_resource(Time::<Fixed>::from_duration(step));
+        }
+        app.configure_sets(
+            self.schedule,
+            (
+                SoftBodySystems::Prepare,
+                SoftBodySystems::Forces,
+                SoftBodySystems::Contacts,
+                SoftBodySystems::OneRing,
+                SoftBodySystems::PerTet,
+                SoftBodySystems::Plasticity,
+                SoftBodySystems::Integrate,
+                SoftBodySystems::Writeback,
+            )
+                .chain(),
+        );
+        app.add_systems(
+            self.schedule,
+            (
+                prepare.in_set(SoftBodySystems::Prepare),
+                apply_forces.in_set(SoftBodySystems::Forces),
+                resolve_contacts.in_set(SoftBodySystems::Contacts),
+                one_ring.in_set(SoftBodySystems::OneRing),
+                per_tet.in_set(SoftBodySystems::PerTet),
+                plasticity.in_set(SoftBodySystems::Plasticity),
+                integrate.in_set(SoftBodySystems::Integrate),
+                writeback.in_set(SoftBodySystems::Writeback),
+            ),
+        );
+    }
+}
