@@ -73,48 +73,24 @@ pub struct ImpulseSettings {
     pub neighbour_clamp: bool,
     /// Relative volume error `|V - V0| / V0` below which a tet needs no impulse; a ring is
     /// left alone when its own volume is within it and none of its tets is off by more than
-    /// `ring_tet_tolerance`. The paper corrects every tet and ring
-    /// every step, however small its error; most of them are within a hundredth of a percent
-    /// once a body has settled, and their impulses would only cost time. Not a limit on the
-    /// total error: a tet this close contributes at most this fraction of its volume to it.
+    /// `ring_tet_tolerance`. The paper corrects every tet and ring every step, however small
+    /// its error; once a body has settled most are within a hundredth of a percent, and their
+    /// impulses would only cost time. Not a limit on the total error: a tet this close adds at
+    /// most this fraction of its volume to it. The per-tet pass skips a tet when `gamma` times
+    /// its error is within the tolerance (its impulse restores only that share).
     ///
-    /// The per-tet pass holds the correction it would make to the same limit: it skips a tet
-    /// when `gamma` times its error is within the tolerance (errors up to 2.4 % with the
-    /// paper's `gamma = 1/8`), since its impulse restores only that share of the error; the
-    /// one-ring pass, which restores all of it, has corrected such a tet's ring already.
-    /// Measured in `paper_figures` against the same limit on the error itself: peaks 0.30 /
-    /// 0.20 / 0.28 / 0.90 / 0.50 % -> 0.26 / 0.21 / 0.28 / 0.90 / 0.57 % (bar, sphere on the
-    /// bar, cube, creature, plastic block), mean per-tet error 0.069 / 0.103 / 0.109 / 0.346 /
-    /// 0.702 % -> 0.075 / 0.103 / 0.115 / 0.326 / 0.760 %, inverted tets at most 2 -> 3; per
-    /// step 0.61 / 0.64 / 1.13 / 1.28 / 0.80 -> 0.53 / 0.56 / 0.95 / 1.04 / 0.63 ms (the cube's
-    /// per-tet pass had 1 785 tets a step to correct, and has 179).
-    ///
-    /// The default, 0.3 %, is a third of the 1 % the method is held to. Measured in the
-    /// paper's scenes (`paper_figures`) against 0.1 %: the same peak errors (all under 1 %,
-    /// the creature's landing 0.90 % against 0.88 %); the mean per-tet error of the bar, the
-    /// sphere on it and the cube up from 0.02 / 0.07 / 0.07 % to 0.07 / 0.10 / 0.11 % (the
-    /// creature's and the plastic block's, 0.34 and 0.70 %, come from their deformation and
-    /// hardly change); the soft cube's step 1.58 -> 1.29 ms, the sphere on the bar's 0.86 ->
-    /// 0.75 ms (the creature's, whose impulses come from its landing, about the same). Lower
-    /// it where single tets must stay closer to their volume.
+    /// Default: 0.003 (0.3 %, a third of the 1 % the method is held to). Lower it where single
+    /// tets must stay closer to their volume, at more cost per step; the figures behind the
+    /// default are in PERFORMANCE.md ("the per-tet tolerance", "rings within tolerance").
     pub tolerance: f32,
     /// Relative volume error of a single tet above which its ring is corrected even though the
     /// ring's volume is within `tolerance`. A ring impulse restores the ring's volume; how the
-    /// error is spread among the ring's tets is what the per-tet pass evens out, and a ring
-    /// whose tets are off in opposite directions gets a root that the ring step limit cuts
-    /// short (it moves them little, at a ring impulse's full cost). The per-tet pass only
-    /// corrects tets off by more than `tolerance / gamma` (2.4 %), so rings still step in from
-    /// this error on. Setting it to `tolerance` gives the rule used before: a ring is corrected
-    /// when any of its tets is off by more than `tolerance`.
+    /// error is spread among its tets is the per-tet pass's to even out, and a ring whose tets
+    /// are off in opposite directions gets a root that the ring step limit cuts short (little
+    /// motion at a ring impulse's full cost). Equal to `tolerance`, a ring is corrected whenever
+    /// any of its tets is off by more than that.
     ///
-    /// The default, 1 %, is the error the method is held to. Measured in the paper's scenes
-    /// (`paper_figures`) against `tolerance` (0.3 %): peaks 0.27 / 0.21 / 0.27 / 0.90 / 0.55 %
-    /// -> 0.26 / 0.20 / 0.28 / 0.87 / 0.53 % (bar, sphere on the bar, cube, creature, plastic
-    /// block); mean per-tet error 0.08 / 0.11 / 0.11 / 0.35 / 0.71 % -> 0.19 / 0.21 / 0.24 /
-    /// 0.40 / 0.76 %; inverted tets at most 3 -> 4 (the creature's landing). Rings corrected a
-    /// step in the soft cube: 1 651 -> 1 126 under the sphere (from 2 s), 670 -> 238 at rest
-    /// (from 12 s); the one-ring pass of the whole cube scene 24.6 -> 18.3 billion
-    /// instructions (callgrind), the creature's 10.6 -> 9.5.
+    /// Default: 0.01 (1 %, the error the method is held to; PERFORMANCE.md, stop 17).
     pub ring_tet_tolerance: f32,
 }
 
