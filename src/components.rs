@@ -15,6 +15,36 @@ use crate::core::{MaterialError, Runaway, SoftBodyMaterial, SoftBodyState, StepC
 /// follows the body: its translation is the centre of mass, its rotation and scale identity,
 /// so a camera or child entity can follow it. A scale in the spawn transform is baked into the
 /// rest shape (the tet mesh is rebuilt at that scale).
+///
+/// A jelly cube dropped on the ground, stepped headless (a game adds `DefaultPlugins` instead
+/// and lets the fixed clock run):
+///
+/// ```
+/// use std::time::Duration;
+///
+/// use bevy::prelude::*;
+/// use bevy::time::TimeUpdateStrategy;
+/// use bevy_soft_body::{core::box_grid, prelude::*};
+///
+/// let mut app = App::new();
+/// app.add_plugins((MinimalPlugins, SoftBodyPlugin::default()))
+///     // Every update advances the clock by one step of the plugin's 10 ms.
+///     .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(10)));
+/// // A 0.5 m cube of 4 cells a side (320 tets), its lowest point 0.3 m up.
+/// let mesh = box_grid(UVec3::splat(4), Vec3::splat(0.125), Vec3::ZERO).unwrap();
+/// let jelly = SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
+/// let jelly = app.world_mut().spawn((jelly, Transform::from_xyz(0.0, 0.3, 0.0))).id();
+/// app.world_mut()
+///     .spawn((StaticCollider::ground(0.8), Transform::default()));
+/// for _ in 0..=100 {
+///     app.update();
+/// }
+/// // A second later it has landed, squashed and kept its volume.
+/// let stats = app.world().get::<SoftBodyStats>(jelly).unwrap();
+/// assert!(stats.peak_volume_error_pct.abs() < 1.0);
+/// let centre = app.world().get::<Transform>(jelly).unwrap().translation;
+/// assert!(centre.y < 0.3 && centre.y > 0.1, "{centre}");
+/// ```
 #[derive(Component)]
 #[require(Transform, SoftBodyStats)]
 pub struct SoftBody {
@@ -62,7 +92,23 @@ impl SoftBody {
 }
 
 /// Particles of the [`SoftBody`] on the same entity that do not move (the held end of the
-/// twisted bar, a creature's anchor). Remove the component to let them go.
+/// twisted bar, a creature's anchor). Remove the component to let them go. An index past the
+/// body's particles is reported once as a [`SoftBodyError`]; the others still hold.
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::{core::box_grid, prelude::*};
+///
+/// // A soft bar hanging from its top: the particles of its top face are pinned.
+/// let mesh = box_grid(UVec3::new(2, 8, 2), Vec3::splat(0.05), Vec3::ZERO).unwrap();
+/// let top: Vec<u32> = (0..mesh.positions().len() as u32)
+///     .filter(|&i| mesh.positions()[i as usize].y > 0.39)
+///     .collect();
+/// let bar = SoftBody::new(mesh.into(), SoftBodyMaterial::RUBBER).unwrap();
+/// # let mut world = World::new();
+/// # let mut commands = world.commands();
+/// commands.spawn((bar, PinnedParticles(top), Transform::from_xyz(0.0, 1.0, 0.0)));
+/// ```
 #[derive(Component, Clone, Debug, Default, Reflect)]
 #[reflect(Component)]
 pub struct PinnedParticles(pub Vec<u32>);

@@ -250,7 +250,31 @@ impl ElasticSettings {
 /// Start from a preset ([`SoftBodyMaterial::JELLY`], [`FLESH`](SoftBodyMaterial::FLESH),
 /// [`RUBBER`](SoftBodyMaterial::RUBBER), [`HARD_RUBBER`](SoftBodyMaterial::HARD_RUBBER)) or
 /// [`SoftBodyMaterial::elastic`] with a Young's modulus; [`SoftBodyMaterial::paper`] gives the
-/// paper's normalised springs.
+/// paper's normalised springs. A material is checked when a body is made of it: a bad value
+/// is a named [`MaterialError`], never a panic.
+///
+/// ```
+/// use bevy_soft_body::core::{ElasticSettings, Elasticity, MaterialError, SoftBodyMaterial};
+///
+/// // A firm gel: 60 kPa, a little more damping than the jelly preset.
+/// let gel = SoftBodyMaterial::elastic(1030.0, 60_000.0, 0.02);
+/// assert!(gel.validate().is_ok());
+/// // A heavier rubber, everything else as the preset.
+/// let heavy_rubber = SoftBodyMaterial { density: 1500.0, ..SoftBodyMaterial::RUBBER };
+/// assert!(heavy_rubber.validate().is_ok());
+/// // A Poisson's ratio past 0.5 is not a material.
+/// let bad = SoftBodyMaterial {
+///     elasticity: Elasticity::Elastic(ElasticSettings {
+///         poisson_ratio: 0.7,
+///         ..ElasticSettings::new(20_000.0, 0.01)
+///     }),
+///     ..SoftBodyMaterial::JELLY
+/// };
+/// assert!(matches!(
+///     bad.validate(),
+///     Err(MaterialError::BadParameter { name: "poisson_ratio", .. })
+/// ));
+/// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SoftBodyMaterial {
     /// Mass per unit volume, kg/m^3; each tet gives a quarter of its mass to each vertex.
