@@ -31,6 +31,8 @@ mod measure_args;
 
 use measure_args::{fraction, substeps};
 
+use clap::Parser;
+
 use std::time::Duration;
 
 use bevy::app::{TaskPoolOptions, TaskPoolPlugin};
@@ -56,55 +58,65 @@ struct Args {
     impulses: ImpulseSettings,
 }
 
-fn parse_args() -> Result<Args, String> {
-    let mut args = std::env::args().skip(1);
-    let mut parsed = Args {
-        threads: vec![1],
-        only: None,
-        method: None,
-        xpbd_substeps: 10,
-        keep_awake: true,
-        stages: false,
-        impulses: ImpulseSettings::PAPER,
-    };
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--threads" => {
-                let list = args.next().ok_or("--threads needs a number")?;
-                parsed.threads = list
-                    .split(',')
-                    .map(|n| {
-                        n.trim()
-                            .parse()
-                            .ok()
-                            .filter(|&n| n >= 1)
-                            .ok_or(format!("--threads: `{n}` is not a thread count"))
-                    })
-                    .collect::<Result<_, _>>()?;
-            }
-            "--only" => parsed.only = Some(args.next().ok_or("--only needs a name")?),
-            "--method" => {
-                let name = args.next().ok_or("--method needs a name")?;
-                if !["baseline", "paper", "xpbd"].contains(&name.as_str()) {
-                    return Err(format!("--method: `{name}` is not baseline, paper or xpbd"));
-                }
-                parsed.method = Some(name);
-            }
-            "--xpbd-substeps" => parsed.xpbd_substeps = substeps(&a, args.next())?,
-            "--threads-sleep" => parsed.keep_awake = false,
-            "--stages" => parsed.stages = true,
-            "--tolerance" => parsed.impulses.tolerance = fraction(&a, args.next())?,
-            "--ring-tet-tolerance" => {
-                parsed.impulses.ring_tet_tolerance = fraction(&a, args.next())?;
-            }
-            "--bench" => {} // passed by `cargo bench`-style runners; nothing to do
-            "-h" | "--help" => {
-                return Err("usage: bench [--threads N[,N...]] [--threads-sleep] [--only NAME] [--method NAME] [--xpbd-substeps N] [--tolerance X] [--ring-tet-tolerance X] [--stages]".into());
-            }
-            other => return Err(format!("unknown argument `{other}` (try --help)")),
+/// The command line (see the module's doc).
+#[derive(Parser)]
+#[command(about = "Step times of every scene and method, headless through the plugin")]
+struct Cli {
+    /// Thread counts to run side by side, each at most the pool's (`--threads 1,2`)
+    #[arg(long, value_delimiter = ',', default_value = "1", value_parser = thread_count)]
+    threads: Vec<usize>,
+    /// Let the pool's threads sleep between the stages (`SoftBodyThreads::keep_awake` off)
+    #[arg(long)]
+    threads_sleep: bool,
+    /// Only the scenes whose name contains this
+    #[arg(long)]
+    only: Option<String>,
+    /// Only this method
+    #[arg(long, value_parser = ["baseline", "paper", "xpbd"])]
+    method: Option<String>,
+    /// XPBD's substeps
+    #[arg(long, default_value_t = 10, value_parser = substeps)]
+    xpbd_substeps: u32,
+    /// A line per run with each stage's mean time
+    #[arg(long)]
+    stages: bool,
+    /// The paper's method's `ImpulseSettings::tolerance`
+    #[arg(long, value_parser = fraction)]
+    tolerance: Option<f32>,
+    /// The paper's method's `ImpulseSettings::ring_tet_tolerance`
+    #[arg(long, value_parser = fraction)]
+    ring_tet_tolerance: Option<f32>,
+    /// Passed by `cargo bench`-style runners; ignored
+    #[arg(long, hide = true)]
+    bench: bool,
+}
+
+fn thread_count(value: &str) -> Result<usize, String> {
+    value
+        .trim()
+        .parse()
+        .ok()
+        .filter(|&n| n >= 1)
+        .ok_or(format!("`{value}` is not a thread count"))
+}
+
+impl From<Cli> for Args {
+    fn from(cli: Cli) -> Args {
+        let mut impulses = ImpulseSettings::PAPER;
+        impulses.tolerance = cli.tolerance.unwrap_or(impulses.tolerance);
+        impulses.ring_tet_tolerance = cli
+            .ring_tet_tolerance
+            .unwrap_or(impulses.ring_tet_tolerance);
+        Args {
+            threads: cli.threads,
+            only: cli.only,
+            method: cli.method,
+            xpbd_substeps: cli.xpbd_substeps,
+            keep_awake: !cli.threads_sleep,
+            stages: cli.stages,
+            impulses,
         }
     }
-    Ok(parsed)
 }
 
 /// A headless app with `pool` threads in Bevy's compute task pool (where the systems and the
@@ -236,13 +248,7 @@ fn report(scene: &str, method: &str, threads: usize, tets: usize, ms: f64) {
 }
 
 fn main() {
-    let args = match parse_args() {
-        Ok(a) => a,
-        Err(e) => {
-            eprintln!("{e}");
-            std::process::exit(2);
-        }
-    };
+    let args = Args::from(Cli::parse());
     let wanted = |name: &str| args.only.as_deref().is_none_or(|o| name.contains(o));
     let methods: Vec<VolumeMethod> = [
         VolumeMethod::PAPER_BASELINE,

@@ -21,6 +21,8 @@ mod measure_args;
 
 use measure_args::{fraction, substeps};
 
+use clap::Parser;
+
 use std::fmt::Write as _;
 use std::path::PathBuf;
 
@@ -47,65 +49,70 @@ const MATCH_MAX_SUBSTEPS: u32 = 20;
 /// the same build differ by 10 % and more on a busy machine.
 const MATCH_TIE: f64 = 0.05;
 
-fn parse_args() -> Result<Args, String> {
-    let mut out = None;
-    let mut scenes = Vec::new();
-    let mut verbose = false;
-    let mut impulses = ImpulseSettings::PAPER;
-    let mut xpbd_substeps = 10;
-    let mut xpbd_match = false;
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--out" => out = Some(PathBuf::from(args.next().ok_or("--out needs a directory")?)),
-            "--scene" => {
-                let name = args.next().ok_or("--scene needs a name")?;
-                scenes.push(PaperScene::from_name(&name).ok_or_else(|| {
-                    let names: Vec<_> = PaperScene::ALL.iter().map(|s| s.name()).collect();
-                    format!("unknown scene `{name}`; scenes: {}", names.join(", "))
-                })?);
+/// The command line (see the module's doc).
+#[derive(Parser)]
+#[command(about = "The paper's five scenes with every method: Figure 2 and the numbers")]
+struct Cli {
+    /// Folder for the figures and `summary.csv`
+    #[arg(long)]
+    out: PathBuf,
+    /// Only these scenes (repeat for several; default: all five)
+    #[arg(long = "scene", value_parser = scene)]
+    scenes: Vec<PaperScene>,
+    /// Print every method's volume error as it runs
+    #[arg(long)]
+    verbose: bool,
+    /// The paper's method's `ImpulseSettings::tolerance`
+    #[arg(long, value_parser = fraction)]
+    tolerance: Option<f32>,
+    /// The paper's method's `ImpulseSettings::ring_tet_tolerance`
+    #[arg(long, value_parser = fraction)]
+    ring_tet_tolerance: Option<f32>,
+    /// XPBD's substeps
+    #[arg(long, default_value_t = 10, value_parser = substeps)]
+    xpbd_substeps: u32,
+    /// Also find, per scene, the fewest XPBD substeps at or under the paper's method's error
+    #[arg(long)]
+    xpbd_match: bool,
+    /// Switch parts of the paper's method off, to see what each one does
+    #[arg(long, value_delimiter = ',', value_parser = ["one-ring", "per-tet", "clamp"])]
+    without: Vec<String>,
+}
+
+fn scene(name: &str) -> Result<PaperScene, String> {
+    PaperScene::from_name(name).ok_or_else(|| {
+        let names: Vec<_> = PaperScene::ALL.iter().map(|s| s.name()).collect();
+        format!("unknown scene `{name}`; scenes: {}", names.join(", "))
+    })
+}
+
+impl From<Cli> for Args {
+    fn from(cli: Cli) -> Args {
+        let mut impulses = ImpulseSettings::PAPER;
+        impulses.tolerance = cli.tolerance.unwrap_or(impulses.tolerance);
+        impulses.ring_tet_tolerance = cli
+            .ring_tet_tolerance
+            .unwrap_or(impulses.ring_tet_tolerance);
+        for part in &cli.without {
+            match part.as_str() {
+                "one-ring" => impulses.one_ring = false,
+                "per-tet" => impulses.per_tet = false,
+                _ => impulses.neighbour_clamp = false,
             }
-            "--verbose" => verbose = true,
-            "--tolerance" => impulses.tolerance = fraction(&a, args.next())?,
-            "--ring-tet-tolerance" => impulses.ring_tet_tolerance = fraction(&a, args.next())?,
-            "--xpbd-match" => xpbd_match = true,
-            "--xpbd-substeps" => xpbd_substeps = substeps(&a, args.next())?,
-            "--without" => {
-                // Switch parts of the paper's method off, to see what each one does.
-                for part in args
-                    .next()
-                    .ok_or("--without needs one-ring, per-tet or clamp")?
-                    .split(',')
-                {
-                    match part {
-                        "one-ring" => impulses.one_ring = false,
-                        "per-tet" => impulses.per_tet = false,
-                        "clamp" => impulses.neighbour_clamp = false,
-                        other => {
-                            return Err(format!(
-                                "unknown part `{other}`: one-ring, per-tet or clamp"
-                            ));
-                        }
-                    }
-                }
-            }
-            "-h" | "--help" => {
-                return Err("usage: paper_figures --out DIR [--scene NAME]... [--without one-ring,per-tet,clamp] [--tolerance X] [--ring-tet-tolerance X] [--xpbd-substeps N] [--xpbd-match] [--verbose]".into());
-            }
-            other => return Err(format!("unknown argument `{other}` (try --help)")),
+        }
+        Args {
+            out: cli.out,
+            scenes: if cli.scenes.is_empty() {
+                PaperScene::ALL.to_vec()
+            } else {
+                cli.scenes
+            },
+            verbose: cli.verbose,
+            impulses,
+            xpbd_substeps: cli.xpbd_substeps,
+            xpbd_match: cli.xpbd_match,
         }
     }
-    if scenes.is_empty() {
-        scenes = PaperScene::ALL.to_vec();
-    }
-    Ok(Args {
-        out: out.ok_or("--out DIR is required")?,
-        scenes,
-        verbose,
-        impulses,
-        xpbd_substeps,
-        xpbd_match,
-    })
 }
 
 /// One run's time series and summary.
@@ -190,13 +197,7 @@ fn run(scene: PaperScene, method: VolumeMethod, verbose: bool) -> Run {
 }
 
 fn main() {
-    let args = match parse_args() {
-        Ok(a) => a,
-        Err(e) => {
-            eprintln!("{e}");
-            std::process::exit(2);
-        }
-    };
+    let args = Args::from(Cli::parse());
     if let Err(e) = std::fs::create_dir_all(&args.out) {
         eprintln!("cannot create {}: {e}", args.out.display());
         std::process::exit(1);
