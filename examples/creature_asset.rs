@@ -9,6 +9,8 @@
 
 use std::path::PathBuf;
 
+use clap::Parser;
+
 use bevy_soft_body::core::{surface_nets, write_obj};
 use bevy_soft_body::scenes::{creature_bounds, creature_sdf};
 use glam::Vec3;
@@ -16,18 +18,17 @@ use glam::Vec3;
 /// Sampling step of the surface, metres: about a third of the tet cells' size at 6500 tets.
 const SPACING: f32 = 0.038;
 
+/// The command line.
+#[derive(Parser)]
+#[command(about = "Writes the creature's detailed surface as OBJ")]
+struct Cli {
+    /// Where to write it
+    #[arg(long, default_value = "assets/creature.obj")]
+    out: PathBuf,
+}
+
 fn main() {
-    let mut args = std::env::args().skip(1);
-    let mut out = PathBuf::from("assets/creature.obj");
-    while let Some(a) = args.next() {
-        match (a.as_str(), args.next()) {
-            ("--out", Some(path)) => out = PathBuf::from(path),
-            _ => {
-                eprintln!("usage: creature_asset [--out PATH]");
-                std::process::exit(2);
-            }
-        }
-    }
+    let out = Cli::parse().out;
     let (lo, hi) = creature_bounds();
     let margin = Vec3::splat(2.0 * SPACING);
     let mut surface = surface_nets(creature_sdf, lo - margin, hi + margin, SPACING);

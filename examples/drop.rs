@@ -24,75 +24,45 @@ use bevy_soft_body::core::{
 };
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::PaperScene;
+use clap::Parser;
 
 /// Largest side of the dropped model, metres.
 const SIZE: f32 = 2.0;
 /// Height of the model's lowest point above the ground when dropped, metres.
 const LIFT: f32 = 0.5;
 
+/// The command line (see the module's doc).
+#[derive(Parser)]
+#[command(about = "Drops any OBJ or TetGen mesh as a soft body and reports its volume error")]
 struct Args {
+    /// `MESH.obj` (tetrahedralized first) or `MESH.node` (with its `.ele`)
     mesh: PathBuf,
+    /// Tets for an OBJ mesh
+    #[arg(long, default_value_t = 6000)]
     tets: u32,
+    /// Simulated seconds, headless
+    #[arg(long, default_value_t = 6.0, value_parser = seconds)]
     seconds: f32,
+    /// No window: print the volume error every second
+    #[arg(long)]
     headless: bool,
+    /// Save a PNG of the window here after `--frames` frames, then exit
+    #[arg(long)]
     screenshot: Option<PathBuf>,
+    /// Frames before the screenshot
+    #[arg(long, default_value_t = 300)]
     frames: u32,
+    /// Start with the debug gizmos on
+    #[arg(long)]
     gizmos: bool,
 }
 
-fn parse_args() -> Result<Args, String> {
-    let mut args = std::env::args().skip(1);
-    let (mut mesh, mut tets, mut seconds, mut headless) = (None, 6000, 6.0, false);
-    let (mut screenshot, mut frames, mut gizmos) = (None, 300, false);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--tets" => {
-                let n = args.next().ok_or("--tets needs a number")?;
-                tets = n
-                    .parse()
-                    .map_err(|_| format!("--tets: `{n}` is not a count"))?;
-            }
-            "--seconds" => {
-                let s = args.next().ok_or("--seconds needs a number")?;
-                seconds = s
-                    .parse()
-                    .ok()
-                    .filter(|s: &f32| s.is_finite() && *s > 0.0 && *s <= 3600.0)
-                    .ok_or(format!("--seconds: `{s}` is not a duration up to 3600"))?;
-            }
-            "--headless" => headless = true,
-            "--screenshot" => {
-                screenshot = Some(PathBuf::from(
-                    args.next().ok_or("--screenshot needs a path")?,
-                ));
-            }
-            "--frames" => {
-                let n = args.next().ok_or("--frames needs a number")?;
-                frames = n
-                    .parse()
-                    .map_err(|_| format!("--frames: `{n}` is not a count"))?;
-            }
-            "--gizmos" => gizmos = true,
-            "-h" | "--help" => {
-                return Err(
-                    "usage: drop MESH.obj|MESH.node [--tets N] [--seconds S] [--headless]".into(),
-                );
-            }
-            other if other.starts_with("--") => {
-                return Err(format!("unknown option `{other}` (try --help)"));
-            }
-            other => mesh = Some(PathBuf::from(other)),
-        }
-    }
-    Ok(Args {
-        mesh: mesh.ok_or("a mesh file is required (try --help)")?,
-        tets,
-        seconds,
-        headless,
-        screenshot,
-        frames,
-        gizmos,
-    })
+fn seconds(value: &str) -> Result<f32, String> {
+    value
+        .parse()
+        .ok()
+        .filter(|s: &f32| s.is_finite() && *s > 0.0 && *s <= 3600.0)
+        .ok_or(format!("`{value}` is not a duration up to 3600"))
 }
 
 /// The tet mesh and the surface to show, read from `path`.
@@ -242,13 +212,7 @@ fn windowed(mesh: TetMesh, surface: TriangleSurface, args: &Args) -> AppExit {
 }
 
 fn main() -> AppExit {
-    let args = match parse_args() {
-        Ok(a) => a,
-        Err(e) => {
-            eprintln!("{e}");
-            return AppExit::from_code(2);
-        }
-    };
+    let args = Args::parse();
     let (mesh, surface) = match load(&args.mesh, args.tets) {
         Ok(loaded) => loaded,
         Err(e) => {

@@ -9,25 +9,22 @@
 
 use std::path::PathBuf;
 
+use clap::Parser;
+
 use bevy_soft_body::core::{TriangleSurface, subdivided_box, torus, uv_sphere, write_obj};
 use glam::Vec3;
 
+/// The command line.
+#[derive(Parser)]
+#[command(about = "Writes the tetrahedralizer's test shapes as OBJ files")]
+struct Cli {
+    /// Folder for the OBJ files
+    #[arg(long)]
+    out: PathBuf,
+}
+
 fn main() {
-    let mut args = std::env::args().skip(1);
-    let mut out = None;
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--out" => out = args.next().map(PathBuf::from),
-            _ => {
-                eprintln!("usage: shapes --out DIR");
-                std::process::exit(2);
-            }
-        }
-    }
-    let Some(out) = out else {
-        eprintln!("usage: shapes --out DIR");
-        std::process::exit(2);
-    };
+    let out = Cli::parse().out;
     if let Err(e) = std::fs::create_dir_all(&out) {
         eprintln!("cannot create {}: {e}", out.display());
         std::process::exit(1);

@@ -10,59 +10,37 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use bevy_soft_body::core::{Resolution, parse_obj, tetrahedralize, write_tetgen};
+use clap::Parser;
 
-struct Args {
+/// The command line (see the module's doc).
+#[derive(Parser)]
+#[command(about = "Tetrahedralizes a triangle mesh (OBJ) and writes it as TetGen files")]
+struct Cli {
+    /// The OBJ file
     input: PathBuf,
-    resolution: Resolution,
+    /// About this many tets (default: 6000)
+    #[arg(long, conflicts_with = "cell")]
+    tets: Option<u32>,
+    /// Cells of this size, in the mesh's units
+    #[arg(long)]
+    cell: Option<f32>,
+    /// Writes `OUT.node` and `OUT.ele`
+    #[arg(long)]
     out: PathBuf,
 }
 
-fn parse_args() -> Result<Args, String> {
-    let mut args = std::env::args().skip(1);
-    let (mut input, mut out, mut resolution) = (None, None, Resolution::default());
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--tets" => {
-                let n = args.next().ok_or("--tets needs a number")?;
-                resolution = Resolution::TargetTets(
-                    n.parse()
-                        .map_err(|_| format!("--tets: `{n}` is not a count"))?,
-                );
-            }
-            "--cell" => {
-                let c = args.next().ok_or("--cell needs a size")?;
-                resolution = Resolution::CellSize(
-                    c.parse()
-                        .map_err(|_| format!("--cell: `{c}` is not a size"))?,
-                );
-            }
-            "--out" => out = Some(PathBuf::from(args.next().ok_or("--out needs a path")?)),
-            "-h" | "--help" => {
-                return Err(
-                    "usage: tetrahedralize IN.obj [--tets N | --cell SIZE] --out OUT".into(),
-                );
-            }
-            other if other.starts_with("--") => {
-                return Err(format!("unknown option `{other}` (try --help)"));
-            }
-            other => input = Some(PathBuf::from(other)),
+impl Cli {
+    fn resolution(&self) -> Resolution {
+        match (self.tets, self.cell) {
+            (Some(n), _) => Resolution::TargetTets(n),
+            (None, Some(size)) => Resolution::CellSize(size),
+            (None, None) => Resolution::default(),
         }
     }
-    Ok(Args {
-        input: input.ok_or("an input OBJ file is required (try --help)")?,
-        resolution,
-        out: out.ok_or("--out OUT is required")?,
-    })
 }
 
 fn main() {
-    let args = match parse_args() {
-        Ok(a) => a,
-        Err(e) => {
-            eprintln!("{e}");
-            std::process::exit(2);
-        }
-    };
+    let args = Cli::parse();
     let fail = |message: String| -> ! {
         eprintln!("{message}");
         std::process::exit(1);
@@ -72,7 +50,7 @@ fn main() {
     let surface =
         parse_obj(&bytes).unwrap_or_else(|e| fail(format!("{}: {e}", args.input.display())));
     let start = Instant::now();
-    let result = tetrahedralize(&surface.positions, &surface.indices, args.resolution)
+    let result = tetrahedralize(&surface.positions, &surface.indices, args.resolution())
         .unwrap_or_else(|e| fail(format!("{}: {e}", args.input.display())));
     let seconds = start.elapsed().as_secs_f64();
     let (node, ele) = write_tetgen(&result.mesh);

@@ -19,60 +19,35 @@ use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
 use bevy_soft_body::surface_mesh;
 
 /// Command-line options every example accepts.
-#[derive(Resource, Clone, Debug, Default)]
+#[derive(Resource, Clone, Debug, Default, clap::Parser)]
+#[command(about = "A bevy_soft_body example")]
 pub struct ExampleOptions {
-    /// Save a PNG of the window here after `frames` frames, then exit.
+    /// Save a PNG of the window here after `--frames` frames, then exit
+    #[arg(long)]
     pub screenshot: Option<PathBuf>,
     /// Frames before the screenshot. With `--screenshot`, each frame is exactly one 10 ms step,
-    /// so the picture does not depend on how fast the machine renders.
+    /// so the picture does not depend on how fast the machine renders
+    #[arg(long, default_value_t = 300)]
     pub frames: u32,
-    /// `--scene NAME` for the playground and compare.
+    /// The paper's scene to show first (the playground and compare)
+    #[arg(long, value_parser = paper_scene)]
     pub scene: Option<PaperScene>,
-    /// `--gizmos`: start with the debug gizmos on.
+    /// Start with the debug gizmos on
+    #[arg(long)]
     pub gizmos: bool,
 }
 
+fn paper_scene(name: &str) -> Result<PaperScene, String> {
+    PaperScene::from_name(name).ok_or_else(|| {
+        let names: Vec<_> = PaperScene::ALL.iter().map(|s| s.name()).collect();
+        format!("unknown scene `{name}`; scenes: {}", names.join(", "))
+    })
+}
+
 impl ExampleOptions {
-    /// Reads `--screenshot PATH`, `--frames N` and `--scene NAME`; exits with a message on
-    /// anything else.
+    /// Reads the options from the command line; exits with a message on anything else.
     pub fn from_args() -> Self {
-        let mut options = ExampleOptions {
-            frames: 300,
-            ..Default::default()
-        };
-        let mut args = std::env::args().skip(1);
-        while let Some(arg) = args.next() {
-            let mut value = |name: &str| {
-                args.next().unwrap_or_else(|| {
-                    eprintln!("{name} needs a value");
-                    std::process::exit(2)
-                })
-            };
-            match arg.as_str() {
-                "--screenshot" => options.screenshot = Some(value("--screenshot").into()),
-                "--frames" => {
-                    options.frames = value("--frames").parse().unwrap_or_else(|e| {
-                        eprintln!("--frames: {e}");
-                        std::process::exit(2)
-                    })
-                }
-                "--gizmos" => options.gizmos = true,
-                "--scene" => {
-                    let name = value("--scene");
-                    options.scene = Some(PaperScene::from_name(&name).unwrap_or_else(|| {
-                        eprintln!("unknown scene {name}");
-                        std::process::exit(2)
-                    }))
-                }
-                other => {
-                    eprintln!(
-                        "unknown argument {other}; use [--screenshot PATH --frames N] [--scene NAME] [--gizmos]"
-                    );
-                    std::process::exit(2)
-                }
-            }
-        }
-        options
+        <Self as clap::Parser>::parse()
     }
 }
 
