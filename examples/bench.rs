@@ -29,7 +29,7 @@
 
 mod measure_args;
 
-use measure_args::{fraction, substeps};
+use measure_args::{ToleranceArgs, substeps};
 
 use clap::Parser;
 
@@ -80,12 +80,8 @@ struct Cli {
     /// A line per run with each stage's mean time
     #[arg(long)]
     stages: bool,
-    /// The paper's method's `ImpulseSettings::tolerance`
-    #[arg(long, value_parser = fraction)]
-    tolerance: Option<f32>,
-    /// The paper's method's `ImpulseSettings::ring_tet_tolerance`
-    #[arg(long, value_parser = fraction)]
-    ring_tet_tolerance: Option<f32>,
+    #[command(flatten)]
+    tolerances: ToleranceArgs,
     /// Passed by `cargo bench`-style runners; ignored
     #[arg(long, hide = true)]
     bench: bool,
@@ -102,11 +98,7 @@ fn thread_count(value: &str) -> Result<usize, String> {
 
 impl From<Cli> for Args {
     fn from(cli: Cli) -> Args {
-        let mut impulses = ImpulseSettings::PAPER;
-        impulses.tolerance = cli.tolerance.unwrap_or(impulses.tolerance);
-        impulses.ring_tet_tolerance = cli
-            .ring_tet_tolerance
-            .unwrap_or(impulses.ring_tet_tolerance);
+        let impulses = cli.tolerances.settings();
         Args {
             threads: cli.threads,
             only: cli.only,

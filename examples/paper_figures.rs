@@ -19,7 +19,7 @@
 mod figures;
 mod measure_args;
 
-use measure_args::{fraction, substeps};
+use measure_args::{ToleranceArgs, substeps};
 
 use clap::Parser;
 
@@ -62,12 +62,8 @@ struct Cli {
     /// Print every method's volume error as it runs
     #[arg(long)]
     verbose: bool,
-    /// The paper's method's `ImpulseSettings::tolerance`
-    #[arg(long, value_parser = fraction)]
-    tolerance: Option<f32>,
-    /// The paper's method's `ImpulseSettings::ring_tet_tolerance`
-    #[arg(long, value_parser = fraction)]
-    ring_tet_tolerance: Option<f32>,
+    #[command(flatten)]
+    tolerances: ToleranceArgs,
     /// XPBD's substeps
     #[arg(long, default_value_t = 10, value_parser = substeps)]
     xpbd_substeps: u32,
@@ -88,11 +84,7 @@ fn scene(name: &str) -> Result<PaperScene, String> {
 
 impl From<Cli> for Args {
     fn from(cli: Cli) -> Args {
-        let mut impulses = ImpulseSettings::PAPER;
-        impulses.tolerance = cli.tolerance.unwrap_or(impulses.tolerance);
-        impulses.ring_tet_tolerance = cli
-            .ring_tet_tolerance
-            .unwrap_or(impulses.ring_tet_tolerance);
+        let mut impulses = cli.tolerances.settings();
         for part in &cli.without {
             match part.as_str() {
                 "one-ring" => impulses.one_ring = false,
