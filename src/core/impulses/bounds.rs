@@ -30,9 +30,10 @@ use super::*;
 /// replaced a slack, a gradient sum and a reach each (their extremes over a region came from
 /// different tets, so the bound was looser, and there were three times as many to compute).
 ///
-/// A tet already below `eps` at the start gets as slack half of `CLAMP_SLACK` (the drift before
-/// an impulse and the impulse itself each count once), and no more than its distance to `eps`,
-/// so that it cannot climb above `eps` unseen, where the exact rule would no longer let it drop.
+/// A tet already below `eps` at the start (or at it, see `CLAMP_ROUNDING`) gets as slack half
+/// of `CLAMP_SLACK` (the drift before an impulse and the impulse itself each count once), and
+/// no more than its distance to that boundary, so that it cannot climb past it unseen, where
+/// the exact rule would no longer let it drop.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct ClampBounds {
     /// Whether the bounds describe the current pass.
