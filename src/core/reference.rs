@@ -154,7 +154,8 @@ fn first_below_zero(c: &Cubic, hi: f64) -> Option<f64> {
     None
 }
 
-/// What a pass changes besides the bodies' velocities: the spheres' velocities.
+/// A reference pass's working state: its step, the previewed positions it moves along with the
+/// velocities, and the spheres' velocity changes, added to the spheres at its end.
 struct Pass<'a> {
     h: f32,
     /// The previewed positions `x + h v`, moved along with every velocity change.
