@@ -6,6 +6,7 @@ pub mod body;
 pub mod contacts;
 pub mod deviatoric;
 pub mod embedding;
+pub mod forces;
 pub mod geometry;
 pub mod grid;
 pub mod impulses;
