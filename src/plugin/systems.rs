@@ -286,30 +286,40 @@ pub(super) fn resolve_contacts(
 
 pub(super) fn one_ring(
     time: Res<Time>,
-    mut solver: ResMut<SolverSpheres>,
-    mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Bodies,
+    solver: ResMut<SolverSpheres>,
+    clock: ResMut<SoftBodyStepTime>,
+    bodies: Bodies,
     threads: Res<SoftBodyThreads>,
 ) {
-    let h = time.delta_secs();
-    if h <= 0.0 {
-        return;
-    }
-    let start = Instant::now();
-    let compute = ComputePool::new(&threads);
-    let few = few_bodies(&bodies, &compute);
-    par_with_spheres(&mut bodies, &mut solver, &compute, |s, _, spheres, _| {
-        s.one_ring_pass_on(h, spheres, pass_parallelism(few, s, &compute));
+    let pass = SoftBodyState::one_ring_pass_on;
+    volume_pass(time, solver, clock, bodies, threads, pass, |s| {
+        &mut s.one_ring_ms
     });
-    clock.add_stage(start, |s| &mut s.one_ring_ms);
 }
 
 pub(super) fn per_tet(
+    time: Res<Time>,
+    solver: ResMut<SolverSpheres>,
+    clock: ResMut<SoftBodyStepTime>,
+    bodies: Bodies,
+    threads: Res<SoftBodyThreads>,
+) {
+    let pass = SoftBodyState::per_tet_pass_on;
+    volume_pass(time, solver, clock, bodies, threads, pass, |s| {
+        &mut s.per_tet_ms
+    });
+}
+
+/// One of the volume passes on every body, a large body's in blocks when there are threads to
+/// spare, timed as `stage`.
+fn volume_pass(
     time: Res<Time>,
     mut solver: ResMut<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
     mut bodies: Bodies,
     threads: Res<SoftBodyThreads>,
+    pass: fn(&mut SoftBodyState, f32, &mut [RigidSphereState], &dyn Parallel),
+    stage: fn(&mut SoftBodyStageTimes) -> &mut f64,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -319,9 +329,9 @@ pub(super) fn per_tet(
     let compute = ComputePool::new(&threads);
     let few = few_bodies(&bodies, &compute);
     par_with_spheres(&mut bodies, &mut solver, &compute, |s, _, spheres, _| {
-        s.per_tet_pass_on(h, spheres, pass_parallelism(few, s, &compute));
+        pass(s, h, spheres, pass_parallelism(few, s, &compute));
     });
-    clock.add_stage(start, |s| &mut s.per_tet_ms);
+    clock.add_stage(start, stage);
 }
 
 pub(super) fn plasticity(
