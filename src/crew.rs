@@ -10,7 +10,8 @@
 //! task per other thread, a crew member, that waits for work by spinning on the [`Board`]; the
 //! sections post their jobs there, the posting thread takes jobs too, and the members take the
 //! rest without waking anyone. At the end of the step
-//! ([`SoftBodySystems::Integrate`](crate::SoftBodySystems)) the crew is dismissed and its tasks end.
+//! ([`SoftBodySystems::Integrate`](crate::SoftBodySystems)) the crew is dismissed and its tasks
+//! end.
 //! Measured with `bench --only` on two threads, interleaved with the crew off
 //! (`--threads-sleep`): 16 bodies 0.42-0.53 ms a step against 0.50-0.59, the soft cube
 //! 0.47-0.48 against 0.53-0.58 (one thread: 0.81-0.86 and 0.83-0.88).

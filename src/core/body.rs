@@ -1,24 +1,12 @@
-//! The state of one soft body: particles, springs, and the stages of a step that do not
-//! involve volume impulses or contacts (those are in `impulses.rs` and `contacts.rs`).
-//!
-//! A step is, in this order (the Bevy plugin runs each stage in its own system set):
-//! 1. [`SoftBodyState::apply_forces`]: gravity, springs with damping and, for the baseline,
-//!    the per-tet volume forces change the velocities; kinematic particles get the velocity
-//!    that takes them to their target.
-//! 2. Contacts (`contacts.rs`): velocities are changed so that the previewed positions
-//!    `x + h v` lie outside every collider. The volume passes then see the contact.
-//! 3. [`SoftBodyState::one_ring_pass`] and 4. [`SoftBodyState::per_tet_pass`]: the paper's
-//!    volume impulses on the previewed positions.
-//! 5. [`SoftBodyState::apply_plasticity`]: plastic springs.
-//! 6. Contacts again, then [`SoftBodyState::integrate_positions`]: `x += h v`. The second
-//!    contact pass undoes whatever the volume impulses pushed into a collider, so no particle
-//!    ends a step inside one.
+//! The state of one soft body: particles, springs, contacts and the caches of the volume
+//! passes, with what reads and sets them from outside a step (kinematic particles, metrics,
+//! momentum). The stages of a step are in their own files; their order is in `step.rs`.
 
 use std::sync::Arc;
 
 use glam::Vec3;
 
-use super::contacts::{ChunkFindings, RigidSphereState, in_particle_chunks};
+use super::contacts::{ChunkFindings, in_particle_chunks};
 use super::geometry::signed_volume;
 use super::impulses::{ClampMotion, PassWorker};
 use super::lanes::Point4;
@@ -533,70 +521,6 @@ impl SoftBodyState {
             .zip(&self.masses)
             .map(|(&v, &m)| v * m)
             .sum()
-    }
-
-    /// Runs a whole step without colliders (stages 1, 3, 4, 5, 6): for tests and benchmarks of
-    /// the core. The Bevy plugin runs the stages itself, with contacts between them.
-    pub fn step_free(&mut self, h: f32, gravity: Vec3) {
-        self.begin_step();
-        self.apply_forces(h, gravity);
-        let _ = self.shape_pass(h, &mut [], &[], &Serial);
-        self.one_ring_pass(h, &mut []);
-        self.per_tet_pass(h, &mut []);
-        self.apply_plasticity(h);
-        self.integrate_positions(h);
-    }
-
-    /// Runs a whole step of this body among `spheres` and `colliders`, in the order the plugin
-    /// runs its stages (for one body): forces (the spheres' too), a contact pass, the volume
-    /// passes, plasticity, a last contact pass, then positions (the spheres' too). For using the
-    /// core without Bevy, and for benchmarks of exactly what the plugin does per body.
-    pub fn step_with_contacts(
-        &mut self,
-        h: f32,
-        gravity: Vec3,
-        spheres: &mut [RigidSphereState],
-        colliders: &[super::contacts::ColliderInstance],
-    ) {
-        self.step_with_contacts_on(h, gravity, spheres, colliders, &Serial);
-    }
-
-    /// [`SoftBodyState::step_with_contacts`] with the volume passes' blocks run by `parallel`:
-    /// the same result bit for bit on any number of threads.
-    pub fn step_with_contacts_on(
-        &mut self,
-        h: f32,
-        gravity: Vec3,
-        spheres: &mut [RigidSphereState],
-        colliders: &[super::contacts::ColliderInstance],
-        parallel: &dyn super::parallel::Parallel,
-    ) {
-        // Spheres against the colliders, then the particles against both (the ground last).
-        // A body stepped in substeps meets the colliders there.
-        let contact_pass = |body: &mut Self, spheres: &mut [RigidSphereState]| {
-            for sphere in spheres.iter_mut() {
-                sphere.resolve_static_contacts(h, colliders);
-            }
-            if !body.material.is_substepped() {
-                body.resolve_sphere_contacts(h, spheres);
-                body.resolve_static_contacts(h, colliders);
-            }
-        };
-        self.begin_step();
-        self.apply_forces_on(h, gravity, parallel);
-        for sphere in spheres.iter_mut() {
-            sphere.apply_forces(h, gravity);
-        }
-        contact_pass(self, spheres);
-        let _ = self.shape_pass(h, spheres, colliders, parallel);
-        self.one_ring_pass_on(h, spheres, parallel);
-        self.per_tet_pass_on(h, spheres, parallel);
-        self.apply_plasticity(h);
-        contact_pass(self, spheres);
-        self.integrate_positions(h);
-        for sphere in spheres.iter_mut() {
-            sphere.integrate_position(h);
-        }
     }
 }
 

@@ -15,6 +15,7 @@ use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
     SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
+use crate::core::step::{Stage, spheres_after_bodies, spheres_before_bodies};
 use crate::core::{ColliderInstance, Parallel, RigidSphereState, Serial, SoftBodyState, TetMesh};
 use crate::crew;
 
@@ -37,29 +38,45 @@ pub use timing::{SoftBodyStageTimes, SoftBodyStepTime};
 )]
 pub type SoftBodySet = SoftBodySystems;
 
-/// The stages of a step, run in this order in the plugin's schedule (see `core::body` for what
-/// each does and why in this order).
+/// The plugin's system sets, chained in this order: preparing, the stages of a step in the
+/// core's order ([`Stage::ORDER`]; see `core::step` for what each does and why in this order),
+/// writing back. A game puts its own systems between them.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SoftBodySystems {
-    /// Place new bodies, clear last step's counters, apply pinned and driven particles.
+    /// Place new bodies, clear last step's counters, apply pinned and driven particles, gather
+    /// the rigid spheres and static colliders.
     Prepare,
-    /// Gravity, the paper's springs with damping, baseline volume forces; the velocities of
-    /// spheres.
+    /// [`Stage::Forces`]: gravity, the paper's springs with damping, baseline volume forces;
+    /// the spheres' gravity.
     Forces,
-    /// Contacts on the previewed positions, so the volume passes see them; a shape solved in
-    /// substeps (a physical material's edges, XPBD's whole step) is solved here, meeting the
-    /// contacts in each substep.
+    /// [`Stage::Contacts`]: contacts on the previewed positions, so the volume passes see them;
+    /// a shape solved in substeps (a physical material's, XPBD's whole step) is solved here,
+    /// meeting the contacts in each substep.
     Contacts,
-    /// The one-ring volume impulses.
+    /// [`Stage::OneRing`]: the one-ring volume impulses.
     OneRing,
-    /// The per-tet correction scaled by gamma.
+    /// [`Stage::PerTet`]: the per-tet correction scaled by gamma.
     PerTet,
-    /// Plastic springs.
+    /// [`Stage::Plasticity`]: plastic springs.
     Plasticity,
-    /// A last contact pass, then `x += h v` for particles and spheres.
+    /// [`Stage::Integrate`]: a last contact pass, then `x += h v` for particles and spheres.
     Integrate,
-    /// Metrics into [`SoftBodyStats`], transforms follow the bodies.
+    /// The spheres' components follow the solver, metrics go into [`SoftBodyStats`], the
+    /// bodies' transforms follow the bodies.
     Writeback,
+}
+
+impl From<Stage> for SoftBodySystems {
+    fn from(stage: Stage) -> Self {
+        match stage {
+            Stage::Forces => SoftBodySystems::Forces,
+            Stage::Contacts => SoftBodySystems::Contacts,
+            Stage::OneRing => SoftBodySystems::OneRing,
+            Stage::PerTet => SoftBodySystems::PerTet,
+            Stage::Plasticity => SoftBodySystems::Plasticity,
+            Stage::Integrate => SoftBodySystems::Integrate,
+        }
+    }
 }
 
 /// The crate's plugins a game adds in one go: [`SoftBodyPlugin`] (the simulation), and with
@@ -160,32 +177,31 @@ impl Plugin for SoftBodyPlugin {
         {
             app.insert_resource(Time::<Fixed>::from_duration(step));
         }
-        app.configure_sets(
-            self.schedule,
-            (
-                SoftBodySystems::Prepare,
-                SoftBodySystems::Forces,
-                SoftBodySystems::Contacts,
-                SoftBodySystems::OneRing,
-                SoftBodySystems::PerTet,
-                SoftBodySystems::Plasticity,
-                SoftBodySystems::Integrate,
-                SoftBodySystems::Writeback,
-            )
-                .chain(),
-        );
+        // The sets in the core's order of a step, between preparing and writing back.
+        let sets: Vec<SoftBodySystems> = std::iter::once(SoftBodySystems::Prepare)
+            .chain(Stage::ORDER.map(SoftBodySystems::from))
+            .chain([SoftBodySystems::Writeback])
+            .collect();
+        for pair in sets.windows(2) {
+            app.configure_sets(self.schedule, pair[0].before(pair[1]));
+        }
         app.add_systems(
             self.schedule,
-            (
-                prepare.in_set(SoftBodySystems::Prepare),
-                apply_forces.in_set(SoftBodySystems::Forces),
-                resolve_contacts.in_set(SoftBodySystems::Contacts),
-                one_ring.in_set(SoftBodySystems::OneRing),
-                per_tet.in_set(SoftBodySystems::PerTet),
-                plasticity.in_set(SoftBodySystems::Plasticity),
-                integrate.in_set(SoftBodySystems::Integrate),
-                writeback.in_set(SoftBodySystems::Writeback),
-            ),
+            (prepare, gather_spheres)
+                .chain()
+                .in_set(SoftBodySystems::Prepare),
+        );
+        for stage in Stage::ORDER {
+            app.add_systems(
+                self.schedule,
+                stage_system(stage).in_set(SoftBodySystems::from(stage)),
+            );
+        }
+        app.add_systems(
+            self.schedule,
+            (finish_step, writeback)
+                .chain()
+                .in_set(SoftBodySystems::Writeback),
         );
     }
 }

@@ -146,8 +146,8 @@ pub(super) fn prepare(
 }
 
 /// The rigid spheres and static colliders as the solver sees them during one step, gathered
-/// once in [`SoftBodySystems::Forces`]. The spheres are changed by the contact and volume passes
-/// (particles pressed against a sphere move it) and written back in [`SoftBodySystems::Integrate`];
+/// once in [`SoftBodySystems::Prepare`]. The spheres are changed by the contact and volume passes
+/// (particles pressed against a sphere move it) and written back in [`SoftBodySystems::Writeback`];
 /// the colliders do not move within a step. Also the bodies' entities, scratch for the parallel
 /// stages ([`for_each_body`]). The buffers are reused, so a step does not allocate.
 #[derive(Resource, Default)]
@@ -176,230 +176,106 @@ pub(super) fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> Rigid
     }
 }
 
-// A system takes one parameter per resource and query it reads.
-#[allow(clippy::too_many_arguments)]
-pub(super) fn apply_forces(
-    time: Res<Time>,
-    gravity: Res<SoftBodyGravity>,
-    mut solver_spheres: ResMut<SolverSpheres>,
-    mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Bodies,
+/// Gathers the rigid spheres and static colliders as the solver sees them during the step.
+pub(super) fn gather_spheres(
+    mut solver: ResMut<SolverSpheres>,
     spheres: Query<(Entity, &RigidSphere, &Transform)>,
-    collider_query: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
-    threads: Res<SoftBodyThreads>,
+    colliders: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
 ) {
-    let h = time.delta_secs();
-    if h <= 0.0 {
-        return;
-    }
-    let start = Instant::now();
-    let g = gravity.0;
-    let compute = ComputePool::new(&threads);
-    let few = few_bodies(&bodies, &compute);
-    let solver_spheres = &mut *solver_spheres;
-    par_bodies(&mut bodies, &mut solver_spheres.bodies, &compute, |s, _| {
-        s.apply_forces_on(h, g, pass_parallelism(few, s, &compute))
-    });
-    solver_spheres.entities.clear();
-    solver_spheres.states.clear();
+    let solver = &mut *solver;
+    solver.entities.clear();
+    solver.states.clear();
     for (entity, sphere, transform) in &spheres {
-        let mut state = sphere_state(sphere, transform);
-        state.apply_forces(h, g);
-        solver_spheres.entities.push(entity);
-        solver_spheres.states.push(state);
+        solver.entities.push(entity);
+        solver.states.push(sphere_state(sphere, transform));
     }
-    solver_spheres.colliders.clear();
-    for (collider, transform) in &collider_query {
+    solver.colliders.clear();
+    for (collider, transform) in &colliders {
         let pose = Pose::from_parts(transform.translation, transform.rotation);
-        solver_spheres.colliders.push(ColliderInstance::new(
+        solver.colliders.push(ColliderInstance::new(
             collider.shape.clone(),
             pose,
             collider.friction,
         ));
     }
-    clock.add_stage(start, |s| &mut s.forces_ms);
 }
 
-/// One contact pass over everything: spheres against static colliders, then particles against
-/// spheres, then particles against static colliders (last, so that no particle is left inside
-/// the ground by a sphere pushing it), then `after` on each body in the same task (one parallel
-/// section instead of two: waking a thread for each costs more than a small body's stage).
-/// A large body alone has its particles against the static colliders, and `after`, in
-/// chunks on the threads (the parallelism `after` gets); against the spheres they go one
-/// after another (each push moves the sphere the next particle meets).
-/// Bodies stepped in substeps meet the colliders there (`SoftBodyState::shape_pass`, which
-/// the first pass's `after` runs), not in these passes.
-pub(super) fn contact_pass(
-    h: f32,
-    solver: &mut SolverSpheres,
-    bodies: &mut Bodies,
-    compute: &ComputePool,
-    after: impl Fn(
-        &mut SoftBodyState,
-        &mut SoftBodyStats,
-        &mut [RigidSphereState],
-        &[ColliderInstance],
-        &dyn Parallel,
-    ) + Send
-    + Sync,
+/// The system of `stage`: the spheres' part before the bodies', every body's part in parallel
+/// (one body per job; a large body's blocks in parallel too when there are fewer bodies than
+/// threads), the spheres' part after, timed as the stage. The stages' order is the core's
+/// ([`Stage::ORDER`]); the plugin chains their sets in it.
+#[allow(clippy::type_complexity)]
+pub(super) fn stage_system(
+    stage: Stage,
+) -> impl FnMut(
+    Res<Time>,
+    Res<SoftBodyGravity>,
+    ResMut<SolverSpheres>,
+    ResMut<SoftBodyStepTime>,
+    Bodies,
+    Res<SoftBodyThreads>,
 ) {
-    for sphere in solver.states.iter_mut() {
-        sphere.resolve_static_contacts(h, &solver.colliders);
-    }
-    let few = few_bodies(bodies, compute);
-    par_with_spheres(bodies, solver, compute, |s, stats, spheres, colliders| {
-        let parallel = pass_parallelism(few, s, compute);
-        if !s.material().is_substepped() {
-            stats.contacts += s.resolve_sphere_contacts(h, spheres)
-                + s.resolve_static_contacts_on(h, colliders, parallel);
+    move |time, gravity, mut solver, mut clock, mut bodies, threads| {
+        // The crew stays while the last stage's section runs: dismissed members finish the
+        // posting they are in, and take no other.
+        let _dismiss = (stage == Stage::Integrate).then_some(DismissCrew);
+        let h = time.delta_secs();
+        if h <= 0.0 {
+            return;
         }
-        after(s, stats, spheres, colliders, parallel);
-    });
+        // A stage no body has work in costs no parallel section (waking threads for nothing),
+        // and without spheres nothing at all.
+        let bodies_work = bodies
+            .iter()
+            .any(|(_, body, _)| body.state.has_work_in(stage));
+        if !bodies_work && solver.states.is_empty() {
+            return;
+        }
+        let start = Instant::now();
+        let g = gravity.0;
+        let solver = &mut *solver;
+        spheres_before_bodies(stage, h, g, &mut solver.states, &solver.colliders);
+        if bodies_work {
+            let compute = ComputePool::new(&threads);
+            let few = few_bodies(&bodies, &compute);
+            par_with_spheres(
+                &mut bodies,
+                solver,
+                &compute,
+                |s, stats, spheres, colliders| {
+                    let parallel = pass_parallelism(few, s, &compute);
+                    if stage == Stage::ORDER[0] {
+                        stats.contacts = 0;
+                    }
+                    stats.contacts += s.run_stage(stage, h, g, spheres, colliders, parallel);
+                    if stage == Stage::Integrate {
+                        stats.steps += 1;
+                    }
+                },
+            );
+        }
+        spheres_after_bodies(stage, h, &mut solver.states);
+        clock.add_stage(start, stage);
+    }
 }
 
-pub(super) fn resolve_contacts(
+/// Ends a step: the spheres' components follow the solver's spheres, the step's time is
+/// closed.
+pub(super) fn finish_step(
     time: Res<Time>,
-    mut solver: ResMut<SolverSpheres>,
+    solver: Res<SolverSpheres>,
     mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Bodies,
-    threads: Res<SoftBodyThreads>,
-) {
-    let h = time.delta_secs();
-    if h <= 0.0 {
-        return;
-    }
-    let start = Instant::now();
-    for (_, _, mut stats) in &mut bodies {
-        stats.contacts = 0;
-    }
-    contact_pass(
-        h,
-        &mut solver,
-        &mut bodies,
-        &ComputePool::new(&threads),
-        |s, stats, spheres, colliders, parallel| {
-            stats.contacts += s.shape_pass(h, spheres, colliders, parallel)
-        },
-    );
-    clock.add_stage(start, |s| &mut s.contacts_ms);
-}
-
-pub(super) fn one_ring(
-    time: Res<Time>,
-    solver: ResMut<SolverSpheres>,
-    clock: ResMut<SoftBodyStepTime>,
-    bodies: Bodies,
-    threads: Res<SoftBodyThreads>,
-) {
-    let pass = SoftBodyState::one_ring_pass_on;
-    volume_pass(time, solver, clock, bodies, threads, pass, |s| {
-        &mut s.one_ring_ms
-    });
-}
-
-pub(super) fn per_tet(
-    time: Res<Time>,
-    solver: ResMut<SolverSpheres>,
-    clock: ResMut<SoftBodyStepTime>,
-    bodies: Bodies,
-    threads: Res<SoftBodyThreads>,
-) {
-    let pass = SoftBodyState::per_tet_pass_on;
-    volume_pass(time, solver, clock, bodies, threads, pass, |s| {
-        &mut s.per_tet_ms
-    });
-}
-
-/// One of the volume passes on every body, a large body's in blocks when there are threads to
-/// spare, timed as `stage`.
-fn volume_pass(
-    time: Res<Time>,
-    mut solver: ResMut<SolverSpheres>,
-    mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Bodies,
-    threads: Res<SoftBodyThreads>,
-    pass: fn(&mut SoftBodyState, f32, &mut [RigidSphereState], &dyn Parallel),
-    stage: fn(&mut SoftBodyStageTimes) -> &mut f64,
-) {
-    let h = time.delta_secs();
-    if h <= 0.0 {
-        return;
-    }
-    let start = Instant::now();
-    let compute = ComputePool::new(&threads);
-    let few = few_bodies(&bodies, &compute);
-    par_with_spheres(&mut bodies, &mut solver, &compute, |s, _, spheres, _| {
-        pass(s, h, spheres, pass_parallelism(few, s, &compute));
-    });
-    clock.add_stage(start, stage);
-}
-
-pub(super) fn plasticity(
-    time: Res<Time>,
-    mut solver: ResMut<SolverSpheres>,
-    mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Bodies,
-    threads: Res<SoftBodyThreads>,
-) {
-    let h = time.delta_secs();
-    if h <= 0.0 {
-        return;
-    }
-    // Without plastic bodies, not even a parallel section (waking threads for nothing).
-    if bodies
-        .iter()
-        .all(|(_, body, _)| body.state.material().plasticity.is_none())
-    {
-        return;
-    }
-    let start = Instant::now();
-    let compute = ComputePool::new(&threads);
-    par_bodies(&mut bodies, &mut solver.bodies, &compute, |s, _| {
-        s.apply_plasticity(h)
-    });
-    clock.add_stage(start, |s| &mut s.plasticity_ms);
-}
-
-pub(super) fn integrate(
-    time: Res<Time>,
-    mut solver_spheres: ResMut<SolverSpheres>,
-    mut clock: ResMut<SoftBodyStepTime>,
-    mut bodies: Bodies,
     mut spheres: Query<(&mut RigidSphere, &mut Transform), Without<StaticCollider>>,
-    threads: Res<SoftBodyThreads>,
 ) {
-    // The crew stays while the last section (below) runs: dismissed members finish the
-    // posting they are in, and take no other.
-    let _dismiss = DismissCrew;
-    let h = time.delta_secs();
-    if h <= 0.0 {
+    if time.delta_secs() <= 0.0 {
         return;
     }
-    let start = Instant::now();
-    let solver_spheres = &mut *solver_spheres;
-    let compute = ComputePool::new(&threads);
-    contact_pass(
-        h,
-        solver_spheres,
-        &mut bodies,
-        &compute,
-        |s, stats, _, _, parallel| {
-            s.integrate_positions_on(h, parallel);
-            stats.steps += 1;
-        },
-    );
-    for (entity, state) in solver_spheres
-        .entities
-        .iter()
-        .zip(&mut solver_spheres.states)
-    {
-        state.integrate_position(h);
+    for (entity, state) in solver.entities.iter().zip(&solver.states) {
         if let Ok((mut sphere, mut transform)) = spheres.get_mut(*entity) {
             sphere.velocity = state.velocity;
             transform.translation = state.position;
         }
     }
-    clock.add_stage(start, |s| &mut s.integrate_ms);
     clock.last_ms = clock.current.as_secs_f64() * 1e3;
     clock.total_ms += clock.last_ms;
     clock.steps += 1;

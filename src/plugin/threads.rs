@@ -175,22 +175,6 @@ pub(super) fn for_each_body(
     });
 }
 
-/// Runs `stage` on every body, in parallel on the compute task pool, timing each body.
-pub(super) fn par_bodies(
-    bodies: &mut Bodies,
-    order: &mut Vec<Entity>,
-    compute: &ComputePool,
-    stage: impl Fn(&mut SoftBodyState, &mut SoftBodyStats) + Send + Sync,
-) {
-    let run = |(mut body, mut stats): (Mut<SoftBody>, Mut<SoftBodyStats>)| {
-        let body = &mut *body;
-        let start = Instant::now();
-        stage(&mut body.state, &mut stats);
-        body.step_time += start.elapsed();
-    };
-    for_each_body(bodies, order, compute, run);
-}
-
 /// Runs `pass` on every body in parallel, each against its own copy of the spheres as they were
 /// before the stage, then gives each sphere the changes of its velocity that the bodies made, in
 /// query order (the first body's result as it is, the others' as differences). Every body sees

@@ -43,6 +43,23 @@ pub struct SoftBodyStageTimes {
 }
 
 impl SoftBodyStageTimes {
+    /// The time of `stage`.
+    pub fn stage(&self, stage: Stage) -> f64 {
+        let mut times = *self;
+        *times.stage_mut(stage)
+    }
+
+    fn stage_mut(&mut self, stage: Stage) -> &mut f64 {
+        match stage {
+            Stage::Forces => &mut self.forces_ms,
+            Stage::Contacts => &mut self.contacts_ms,
+            Stage::OneRing => &mut self.one_ring_ms,
+            Stage::PerTet => &mut self.per_tet_ms,
+            Stage::Plasticity => &mut self.plasticity_ms,
+            Stage::Integrate => &mut self.integrate_ms,
+        }
+    }
+
     /// The sum of all stages.
     pub fn sum_ms(&self) -> f64 {
         self.forces_ms
@@ -95,14 +112,10 @@ impl SoftBodyStepTime {
         }
     }
 
-    /// Adds the time since `start` to the step being timed and to its stage.
-    pub(super) fn add_stage(
-        &mut self,
-        start: Instant,
-        stage: fn(&mut SoftBodyStageTimes) -> &mut f64,
-    ) {
+    /// Adds the time since `start` to the step being timed and to `stage`.
+    pub(super) fn add_stage(&mut self, start: Instant, stage: Stage) {
         let elapsed = start.elapsed();
         self.current += elapsed;
-        *stage(&mut self.stages_total) += elapsed.as_secs_f64() * 1e3;
+        *self.stages_total.stage_mut(stage) += elapsed.as_secs_f64() * 1e3;
     }
 }
