@@ -14,8 +14,7 @@
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
 //! between the stages is not in it. A scene's three methods run side by side, in turns of 50
 //! steps, so that their ratios come from the same minutes of the machine. `--threads N` sizes
-//! Bevy's task pools (`--threads-sleep` lets them sleep between the stages:
-//! `SoftBodyThreads::keep_awake` off); a list, `--threads 1,2`, runs every method once per
+//! Bevy's task pools; a list, `--threads 1,2`, runs every method once per
 //! count side by side in the same turns, in one pool of the largest count, each app held to its
 //! own count by `SoftBodyThreads::max_threads` (so a speed-up compares the same minutes too);
 //! `--only NAME` runs the scenes whose name contains NAME, `--method NAME` only that method
@@ -50,8 +49,6 @@ struct Args {
     /// Run only this method (`--method paper`).
     method: Option<String>,
     xpbd_substeps: u32,
-    /// `SoftBodyThreads::keep_awake` (off with `--threads-sleep`).
-    keep_awake: bool,
     /// Print each run's stage times too (`--stages`).
     stages: bool,
     /// The paper's method's settings (`--tolerance X`, `--ring-tet-tolerance X`).
@@ -65,9 +62,6 @@ struct Cli {
     /// Thread counts to run side by side, each at most the pool's (`--threads 1,2`)
     #[arg(long, value_delimiter = ',', default_value = "1", value_parser = thread_count)]
     threads: Vec<usize>,
-    /// Let the pool's threads sleep between the stages (`SoftBodyThreads::keep_awake` off)
-    #[arg(long)]
-    threads_sleep: bool,
     /// Only the scenes whose name contains this
     #[arg(long)]
     only: Option<String>,
@@ -104,7 +98,6 @@ impl From<Cli> for Args {
             only: cli.only,
             method: cli.method,
             xpbd_substeps: cli.xpbd_substeps,
-            keep_awake: !cli.threads_sleep,
             stages: cli.stages,
             impulses,
         }
@@ -115,7 +108,7 @@ impl From<Cli> for Args {
 /// bodies run; the IO and async pools get one each besides; the pools are one per process, so
 /// the first app sets them), stepping `1 / hz` s per update (the paper's scenes 100 Hz, the
 /// game scenes 60), its steps held to `threads` of them.
-fn app(pool: usize, threads: usize, keep_awake: bool, hz: f64) -> App {
+fn app(pool: usize, threads: usize, hz: f64) -> App {
     let mut options = TaskPoolOptions::with_num_threads(pool + 2);
     options.compute.min_threads = pool;
     options.compute.max_threads = pool;
@@ -132,7 +125,6 @@ fn app(pool: usize, threads: usize, keep_awake: bool, hz: f64) -> App {
     ))
     .insert_resource(Time::<Fixed>::from_hz(hz))
     .insert_resource(SoftBodyThreads {
-        keep_awake,
         max_threads: threads,
     });
     app
@@ -202,7 +194,7 @@ fn bench(
         let mut apps: Vec<App> = runs
             .iter()
             .map(|&(threads, method)| {
-                let mut app = app(pool, threads, args.keep_awake, hz);
+                let mut app = app(pool, threads, hz);
                 spawn(app.world_mut(), method);
                 app.world_mut().flush();
                 app

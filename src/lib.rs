@@ -26,7 +26,6 @@
 
 pub mod components;
 pub mod core;
-mod crew;
 #[cfg(feature = "render")]
 pub mod debug;
 pub mod game_scenes;

@@ -1,6 +1,5 @@
 //! Results do not depend on the number of threads: the same scene, stepped with 1, 2 and 4
-//! threads in Bevy's task pools (kept awake through the steps, and on two threads also left to
-//! sleep between the stages: `SoftBodyThreads::keep_awake`; on four held to one and to two by
+//! threads in Bevy's task pools (and on four held to one and to two by
 //! `SoftBodyThreads::max_threads`), ends bit for bit the same, both for several bodies sharing a
 //! sphere (bodies in parallel) and for one large body (its blocks in parallel). The pools are
 //! global to a process, so each thread count runs in a child process (this test binary again,
@@ -20,7 +19,7 @@ const CHILD: &str = "BEVY_SOFT_BODY_THREADS_CHILD";
 /// (`one_body`) one body of 8640 tets with a sphere landing on it, and returns every particle's
 /// and the sphere's final position and the last step's contacts (in the order they came), as
 /// bits.
-fn simulate(threads: usize, max_threads: usize, keep_awake: bool, one_body: bool) -> Vec<u32> {
+fn simulate(threads: usize, max_threads: usize, one_body: bool) -> Vec<u32> {
     // `threads` threads in the compute pool, where the systems and the bodies run.
     let mut options = TaskPoolOptions::with_num_threads(threads + 2);
     options.compute.min_threads = threads;
@@ -36,10 +35,7 @@ fn simulate(threads: usize, max_threads: usize, keep_awake: bool, one_body: bool
         Duration::from_millis(10),
     ))
     .insert_resource(SoftBodyGravity(Vec3::new(0.0, -2.0, 0.0)))
-    .insert_resource(SoftBodyThreads {
-        keep_awake,
-        max_threads,
-    });
+    .insert_resource(SoftBodyThreads { max_threads });
     if one_body {
         let mesh = box_grid(UVec3::splat(12), Vec3::splat(0.05), Vec3::ZERO).unwrap();
         // Enough blocks for every thread.
@@ -102,19 +98,15 @@ fn simulate(threads: usize, max_threads: usize, keep_awake: bool, one_body: bool
     bits
 }
 
-/// Runs `test` in a child process per thread count (1, 2, 4, 2 asleep between the stages, and
-/// 4 held to 1, and to 2 while asleep) and checks that all agree.
+/// Runs `test` in a child process per thread count (1, 2, 4, and 4 held to 1 and to 2) and
+/// checks that all agree.
 fn compare_thread_counts(test: &str, one_body: bool) {
     if let Ok(threads) = std::env::var(CHILD) {
-        let (threads, keep_awake) = match threads.strip_suffix(" asleep") {
-            Some(threads) => (threads, false),
-            None => (threads.as_str(), true),
-        };
         let (threads, max_threads) = match threads.split_once(" max ") {
             Some((threads, max)) => (threads, max.parse().unwrap()),
-            None => (threads, usize::MAX),
+            None => (threads.as_str(), usize::MAX),
         };
-        let bits = simulate(threads.parse().unwrap(), max_threads, keep_awake, one_body);
+        let bits = simulate(threads.parse().unwrap(), max_threads, one_body);
         let hash = bits.iter().fold(0xcbf29ce484222325u64, |h, &b| {
             (h ^ b as u64).wrapping_mul(0x100000001b3)
         });
@@ -139,7 +131,7 @@ fn compare_thread_counts(test: &str, one_body: bool) {
     };
     let one = run("1");
     assert!(one.split(' ').next().unwrap().parse::<usize>().unwrap() > 1000);
-    for threads in ["2", "4", "2 asleep", "4 max 1", "4 max 2 asleep"] {
+    for threads in ["2", "4", "4 max 1", "4 max 2"] {
         assert_eq!(run(threads), one, "{threads} threads differ from one");
     }
 }

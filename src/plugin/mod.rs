@@ -17,7 +17,6 @@ use crate::components::{
 };
 use crate::core::step::{Stage, spheres_after_bodies, spheres_before_bodies};
 use crate::core::{ColliderInstance, Parallel, RigidSphereState, Serial, SoftBodyState, TetMesh};
-use crate::crew;
 
 mod systems;
 mod threads;

@@ -33,17 +33,7 @@ pub(super) fn prepare(
     mut bodies: Query<PreparedBody>,
     targets: Query<&Transform, Without<SoftBody>>,
     mut errors: MessageWriter<SoftBodyError>,
-    threads: Res<SoftBodyThreads>,
 ) {
-    if threads.keep_awake {
-        // First, so that the crew is awake by the first parallel section.
-        muster_crew(
-            &ComputePool::new(&threads),
-            bodies
-                .iter()
-                .map(|(_, body, ..)| body.state.mesh().tet_count()),
-        );
-    }
     for (entity, mut body, mut transform, pinned, driven) in &mut bodies {
         let body = &mut *body;
         if !body.placed {
@@ -216,9 +206,6 @@ pub(super) fn stage_system(
     Res<SoftBodyThreads>,
 ) {
     move |time, gravity, mut solver, mut clock, mut bodies, threads| {
-        // The crew stays while the last stage's section runs: dismissed members finish the
-        // posting they are in, and take no other.
-        let _dismiss = (stage == Stage::Integrate).then_some(DismissCrew);
         let h = time.delta_secs();
         if h <= 0.0 {
             return;

@@ -1,11 +1,18 @@
 //! How a step uses the threads of Bevy's compute task pool: bodies in parallel, a large
-//! body's passes in blocks, and the crew that keeps the pool's threads awake through a step.
+//! body's passes in blocks, each parallel section a `scope` of the pool's tasks.
+//!
+//! A step has no threads of its own and keeps none awake. An earlier design kept the pool's
+//! other threads spinning through a step (a "crew"), so that no section waited for a thread to
+//! wake up; measured against plain scopes on two threads (`bench`, interleaved runs) it gave
+//! nothing once a step's stages became one system each (16 bodies 0.61-0.71 ms against
+//! 0.64-0.85, the 9k-tet box 0.35-0.49 against 0.29-0.44), and it burned a core a game could use,
+//! so it was removed.
 
 use super::*;
 
 /// Runs independent jobs (bodies, or the blocks of a volume pass, see `core::parallel`) on at
-/// most `threads` threads of Bevy's compute task pool (see [`SoftBodyThreads::max_threads`]):
-/// the crew's when it is on duty (see [`crate::crew`]), else as tasks of the pool.
+/// most `threads` threads of Bevy's compute task pool (see [`SoftBodyThreads::max_threads`]),
+/// as tasks of one `scope`.
 pub(super) struct ComputePool {
     /// The threads a step may use: the pool's, at most [`SoftBodyThreads::max_threads`], at
     /// least one (the system's own).
@@ -25,9 +32,6 @@ impl Parallel for ComputePool {
     fn run(&self, jobs: usize, job: &(dyn Fn(usize) + Sync)) {
         if jobs < 2 || self.threads < 2 {
             return Serial.run(jobs, job);
-        }
-        if crew::BOARD.run(jobs, job) {
-            return;
         }
         match bevy::tasks::ComputeTaskPool::try_get() {
             Some(pool) if pool.thread_num() > 1 => {
@@ -64,12 +68,6 @@ impl Parallel for ComputePool {
 #[derive(Resource, Clone, Copy, Debug, Reflect)]
 #[reflect(Resource)]
 pub struct SoftBodyThreads {
-    /// Keep the pool's other threads awake through each step that has work for them (several
-    /// bodies, or a body large enough for its passes to run in parallel): they wait for the
-    /// step's parallel sections spinning instead of asleep, so no section waits for a thread to
-    /// wake up (see `crew.rs`). On by default; off, the threads sleep between the sections:
-    /// less CPU time spent, a longer step when there are several threads.
-    pub keep_awake: bool,
     /// The most threads of the compute pool a step uses, the system's own included: a game
     /// that wants cores left for its other systems sets it lower. `1` runs every stage on
     /// the system's thread; `0` is taken as `1` (a step always has its thread). The default,
@@ -82,32 +80,8 @@ pub struct SoftBodyThreads {
 impl Default for SoftBodyThreads {
     fn default() -> Self {
         SoftBodyThreads {
-            keep_awake: true,
             max_threads: usize::MAX,
         }
-    }
-}
-
-/// Puts the crew on duty for this step if it has parallel work: two bodies or more, or one of
-/// at least [`PARALLEL_PASS_MIN_TETS`] tets; every thread the step may use but one (the step's
-/// own systems need one) becomes a member.
-pub(super) fn muster_crew(compute: &ComputePool, tet_counts: impl Iterator<Item = usize>) {
-    let Some(pool) = bevy::tasks::ComputeTaskPool::try_get() else {
-        return;
-    };
-    if compute.threads < 2 {
-        return;
-    }
-    let (mut bodies, mut largest) = (0, 0);
-    for tets in tet_counts {
-        bodies += 1;
-        largest = largest.max(tets);
-    }
-    if bodies < 2 && largest < PARALLEL_PASS_MIN_TETS {
-        return;
-    }
-    for _ in 0..crew::BOARD.muster(compute.threads - 1) {
-        pool.spawn(crew::BOARD.member()).detach();
     }
 }
 
@@ -147,8 +121,8 @@ pub(super) fn few_bodies(bodies: &Bodies, compute: &ComputePool) -> bool {
     bodies.iter().count() < compute.threads
 }
 
-/// Runs `run` on every body: one body per job on the compute task pool's threads (the crew's,
-/// see [`crate::crew`]), or a single body on this thread (not handed to another, which may first
+/// Runs `run` on every body: one body per job on the compute task pool's threads, or a single
+/// body on this thread (not handed to another, which may first
 /// have to wake up). `order` is scratch for the bodies' entities.
 pub(super) fn for_each_body(
     bodies: &mut Bodies,
@@ -215,15 +189,6 @@ pub(super) fn par_with_spheres(
     }
 }
 
-/// Dismisses the crew when dropped: at the end of a step, however it ends.
-pub(super) struct DismissCrew;
-
-impl Drop for DismissCrew {
-    fn drop(&mut self) {
-        crew::BOARD.dismiss();
-    }
-}
-
 /// The compute task pool of this crate's unit tests: four threads, whichever test sets it up
 /// first (the pool is process-wide, and a headless app's `TaskPoolPlugin` keeps a pool that
 /// exists).
@@ -256,12 +221,7 @@ mod tests {
     fn a_step_uses_no_more_threads_than_max_threads() {
         let pool = test_compute_pool();
         assert_eq!(pool.thread_num(), 4);
-        let limited = |max_threads| {
-            ComputePool::new(&SoftBodyThreads {
-                max_threads,
-                ..Default::default()
-            })
-        };
+        let limited = |max_threads| ComputePool::new(&SoftBodyThreads { max_threads });
         assert_eq!(limited(0).threads, 1);
         assert_eq!(limited(1).threads, 1);
         assert_eq!(limited(usize::MAX).threads, 4);
@@ -272,11 +232,5 @@ mod tests {
         assert!(threads_used(&limited(usize::MAX), 256) > 2);
         assert_eq!(threads_used(&limited(1), 64), 1);
         assert!(threads_used(&limited(2), 64) <= 2);
-        // The same through the crew: one member for two threads, beside this thread.
-        let two = limited(2);
-        muster_crew(&two, [PARALLEL_PASS_MIN_TETS].into_iter());
-        let used = threads_used(&two, 64);
-        crew::BOARD.dismiss();
-        assert!(used <= 2, "{used} threads");
     }
 }
