@@ -435,9 +435,9 @@ impl SoftBodyState {
             return;
         }
         let n = self.positions.len();
-        let positions = SharedSlice::new(&mut self.positions);
-        let velocities = SharedSlice::new(&mut self.velocities);
-        // Each job writes its own chunk's particles.
+        // SAFETY: each job reads and writes only its own chunk's particles.
+        let positions = unsafe { SharedSlice::new(&mut self.positions) };
+        let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
         in_particle_chunks(parallel, &mut self.chunk_findings, n, |found, particles| {
             for i in particles {
                 let next = positions.get(i) + h * velocities.get(i);

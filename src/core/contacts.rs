@@ -189,9 +189,10 @@ pub(crate) fn in_particle_chunks(
     particles: usize,
     job: impl Fn(&mut ChunkFindings, std::ops::Range<usize>) + Sync,
 ) {
-    let findings = SharedSlice::new(findings);
+    // SAFETY: each job takes only its own chunk's findings.
+    let findings = unsafe { SharedSlice::new(findings) };
     parallel.run(particles.div_ceil(CONTACT_CHUNK), &|chunk| {
-        // Safety: each job has its own chunk's findings.
+        // SAFETY: each job has its own chunk's findings.
         let found = unsafe { findings.get_mut(chunk) };
         job(
             found,
@@ -222,12 +223,12 @@ impl SoftBodyState {
         let friction = self.material.friction;
         let n = self.positions.len();
         let (positions, inv_masses) = (&self.positions[..], &self.inv_masses[..]);
-        let velocities = SharedSlice::new(&mut self.velocities);
-        let normals = SharedSlice::new(&mut self.contact_normals);
-        let kept = SharedSlice::new(&mut self.contact_kept);
-        let sphere = SharedSlice::new(&mut self.contact_sphere);
-        let anchors = SharedSlice::new(&mut self.friction_anchors);
-        // Each job writes its own chunk's particles.
+        // SAFETY: each job reads and writes only its own chunk's particles.
+        let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
+        let normals = unsafe { SharedSlice::new(&mut self.contact_normals) };
+        let kept = unsafe { SharedSlice::new(&mut self.contact_kept) };
+        let sphere = unsafe { SharedSlice::new(&mut self.contact_sphere) };
+        let anchors = unsafe { SharedSlice::new(&mut self.friction_anchors) };
         in_particle_chunks(parallel, &mut self.chunk_findings, n, |found, particles| {
             for i in particles {
                 if inv_masses[i] == 0.0 {

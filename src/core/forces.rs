@@ -13,7 +13,8 @@ use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
 impl SoftBodyState {
     /// The dampers of all springs, in index order, which is the blocks' (see [`damp_spring`]).
     pub(crate) fn damp_springs(&mut self, h: f32) {
-        let velocities = SharedSlice::new(&mut self.velocities);
+        // SAFETY: used on this thread alone.
+        let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
         for (&edge, &damping) in self.mesh.edges().iter().zip(&self.edge_damping) {
             let dir = spring_direction(&self.positions, edge).0;
             damp_spring(edge, dir, &self.inv_masses, velocities, h, damping);
@@ -63,9 +64,13 @@ impl SoftBodyState {
             &self.inv_masses[..],
             &self.spring_rest[..],
         );
-        let forces = SharedSlice::new(&mut self.scratch);
-        let velocities = SharedSlice::new(&mut self.velocities);
-        let directions = SharedSlice::new(&mut self.spring_directions);
+        // SAFETY: a phase starts when the one before has ended; in the springs' and the
+        // dampers' phases a block runs after every block it shares a particle with
+        // (`waits_for`), and writes only its own edges' directions; in the particles' phases
+        // each chunk touches its own particles.
+        let forces = unsafe { SharedSlice::new(&mut self.scratch) };
+        let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
+        let directions = unsafe { SharedSlice::new(&mut self.spring_directions) };
         let n = x.len();
         let chunks = n.div_ceil(PARTICLE_CHUNK);
         let (springs_done, dampers_done) = self.block_done.split_at(count);

@@ -90,7 +90,7 @@ impl Vec3x4 {
     /// vector more than the indices reach (the last index read is `values.len() - 2`).
     #[inline(always)]
     pub fn gather_padded(values: &[Vec3], at: [usize; LANES]) -> Vec3x4 {
-        // Safety: `Vec3` is `repr(C)`, three `f32` and no padding (size 12, align 4), so the
+        // SAFETY: `Vec3` is `repr(C)`, three `f32` and no padding (size 12, align 4), so the
         // vectors are `3 * len` numbers one after another.
         let flat: &[f32] =
             unsafe { std::slice::from_raw_parts(values.as_ptr().cast::<f32>(), 3 * values.len()) };

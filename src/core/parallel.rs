@@ -39,16 +39,18 @@ impl Parallel for Serial {
 }
 
 /// A slice that jobs running at the same time may write, each at indices no other running job
-/// reads or writes. Bounds are checked; that no two jobs touch the same element is the caller's
-/// promise, kept by the blocks (see [`Blocks`](super::tet_mesh::Blocks) and its test).
+/// reads or writes. Bounds are checked; that no two jobs touch the same element is promised by
+/// whoever creates it ([`SharedSlice::new`] is `unsafe`), and kept by the blocks (see
+/// [`Blocks`](super::tet_mesh::Blocks) and its test) or by jobs that own their indices.
 pub(crate) struct SharedSlice<'a, T> {
     ptr: *mut T,
     len: usize,
     _borrow: PhantomData<&'a mut [T]>,
 }
 
-// Safety: elements are only reached through `get`/`set`, whose callers guarantee that no
-// element is written by one thread while another reads or writes it.
+// SAFETY: elements are only reached through `get`/`set`/`get_mut`, and the creator of the
+// slice promised (`SharedSlice::new`) that no element is written by one thread while another
+// reads or writes it.
 unsafe impl<T: Send> Send for SharedSlice<'_, T> {}
 unsafe impl<T: Send> Sync for SharedSlice<'_, T> {}
 
@@ -62,7 +64,13 @@ impl<T> Copy for SharedSlice<'_, T> {}
 
 impl<'a, T> SharedSlice<'a, T> {
     /// Shares `slice` for the lifetime of the borrow.
-    pub(crate) fn new(slice: &'a mut [T]) -> Self {
+    ///
+    /// # Safety
+    /// As long as this slice or a copy of it lives, no element may be written (through `set`
+    /// or `get_mut`) by one thread while another thread reads or writes it: the jobs that
+    /// share it must split its indices between them, or order their accesses (the blocks'
+    /// `waits_for`, a phase's end).
+    pub(crate) unsafe fn new(slice: &'a mut [T]) -> Self {
         SharedSlice {
             ptr: slice.as_mut_ptr(),
             len: slice.len(),
@@ -87,7 +95,7 @@ impl<T: Copy> SharedSlice<'_, T> {
     #[inline(always)]
     pub(crate) fn get(&self, i: usize) -> T {
         assert!(i < self.len);
-        // Safety: in bounds; no other job writes element `i` now (the blocks' promise).
+        // SAFETY: in bounds; no other job writes element `i` now (the promise of `new`).
         unsafe { *self.ptr.add(i) }
     }
 
@@ -95,7 +103,8 @@ impl<T: Copy> SharedSlice<'_, T> {
     #[inline(always)]
     pub(crate) fn set(&self, i: usize, value: T) {
         assert!(i < self.len);
-        // Safety: in bounds; no other job reads or writes element `i` now (the blocks' promise).
+        // SAFETY: in bounds; no other job reads or writes element `i` now (the promise of
+        // `new`).
         unsafe { *self.ptr.add(i) = value }
     }
 }

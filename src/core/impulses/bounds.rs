@@ -246,18 +246,23 @@ impl ClampBounds {
     }
 
     /// The arrays, for the jobs of a pass to fill and then read (see [`BoundsView`]).
-    pub(super) fn view(&mut self, regions: ClampRegions) -> BoundsView<'_> {
+    ///
+    /// # Safety
+    /// The promise of [`SharedSlice::new`], for every array: the jobs that use the view split
+    /// its elements between them or order their accesses.
+    pub(super) unsafe fn view(&mut self, regions: ClampRegions) -> BoundsView<'_> {
         BoundsView {
             active: self.active,
             ring_checks: false,
             regions,
-            tet_radius: SharedSlice::new(&mut self.tet_radius),
-            vertex_radius: SharedSlice::new(&mut self.vertex_radius),
-            ring_region_radius: SharedSlice::new(&mut self.ring_region_radius),
-            tet_region_radius: SharedSlice::new(&mut self.tet_region_radius),
-            tet_shape: SharedSlice::new(&mut self.tet_shape),
-            ring_check: SharedSlice::new(&mut self.ring_check),
-            start: SharedSlice::new(&mut self.start),
+            // SAFETY: this function's caller's promise.
+            tet_radius: unsafe { SharedSlice::new(&mut self.tet_radius) },
+            vertex_radius: unsafe { SharedSlice::new(&mut self.vertex_radius) },
+            ring_region_radius: unsafe { SharedSlice::new(&mut self.ring_region_radius) },
+            tet_region_radius: unsafe { SharedSlice::new(&mut self.tet_region_radius) },
+            tet_shape: unsafe { SharedSlice::new(&mut self.tet_shape) },
+            ring_check: unsafe { SharedSlice::new(&mut self.ring_check) },
+            start: unsafe { SharedSlice::new(&mut self.start) },
         }
     }
 

@@ -311,26 +311,32 @@ impl SoftBodyState {
             let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
             let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
             let any_touching = !self.touching.is_empty();
-            let mut bounds = self
-                .clamp_bounds
-                .view(clamp_regions.unwrap_or(ClampRegions::Rings));
+            // SAFETY (for the view and every `SharedSlice` below): the pass's phases run one
+            // after another; in a chunked phase each chunk writes its own tets', vertices' or
+            // regions' entries; in a phase over the blocks a block runs after every block whose
+            // one-ring or tets it shares (`waits_for`), and writes only the particles, tets and
+            // block entries of its own items and their one-rings; each task has its own worker.
+            let mut bounds = unsafe {
+                self.clamp_bounds
+                    .view(clamp_regions.unwrap_or(ClampRegions::Rings))
+            };
             bounds.ring_checks = ring_checks;
-            let velocities = SharedSlice::new(&mut self.velocities);
-            let previews = SharedSlice::new(&mut self.previews);
-            let scratch = SharedSlice::new(&mut self.scratch);
-            let drift = SharedSlice::new(&mut self.clamp_motion.drift);
-            let move_len = SharedSlice::new(&mut self.clamp_motion.move_len);
+            let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
+            let previews = unsafe { SharedSlice::new(&mut self.previews) };
+            let scratch = unsafe { SharedSlice::new(&mut self.scratch) };
+            let drift = unsafe { SharedSlice::new(&mut self.clamp_motion.drift) };
+            let move_len = unsafe { SharedSlice::new(&mut self.clamp_motion.move_len) };
             let walks = WalkMarks {
                 walked: &self.clamp_motion.walked.0,
                 walks: &self.clamp_motion.walks.0,
             };
-            let block_drift = SharedSlice::new(&mut self.clamp_motion.block_drift);
-            let ring_corrected = SharedSlice::new(&mut self.ring_corrected);
+            let block_drift = unsafe { SharedSlice::new(&mut self.clamp_motion.block_drift) };
+            let ring_corrected = unsafe { SharedSlice::new(&mut self.ring_corrected) };
             let far = FarDrift {
                 marks: &self.clamp_motion.far_nearby.0,
                 pass: self.clamp_motion.pass_number,
             };
-            let workers = SharedSlice::new(&mut self.pass_workers);
+            let workers = unsafe { SharedSlice::new(&mut self.pass_workers) };
             let waits_for = &mesh.blocks().waits_for;
             let count = items.len();
             // The clamp bounds are computed first, in chunks: the tets', then the vertices'
@@ -432,11 +438,11 @@ impl SoftBodyState {
                             }
                         }
                         for &earlier in waits_for.row(task) {
-                            // Safety: that task is done; nothing writes its worker now.
+                            // SAFETY: that task is done; nothing writes its worker now.
                             let moved = unsafe { workers.get_mut(earlier as usize) }.max_moved;
                             start_drift = larger(start_drift, moved);
                         }
-                        // Safety: each task is run by one thread only.
+                        // SAFETY: each task is run by one thread only.
                         let worker = unsafe { workers.get_mut(task) };
                         worker.max_moved = start_drift;
                         impulse(&view, worker, items.row(task), items.range(task).start);
@@ -499,7 +505,8 @@ impl SoftBodyState {
     ) -> ImpulseOutcome {
         let mut worker = PassWorker::for_mesh(&self.mesh);
         worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
-        let outcome = self.single_view(h).ring_impulse(&mut worker, p, settings);
+        // SAFETY: the view is used here, on this thread.
+        let outcome = unsafe { self.single_view(h) }.ring_impulse(&mut worker, p, settings);
         self.finish_single(worker, spheres);
         outcome
     }
@@ -518,9 +525,14 @@ impl SoftBodyState {
         let mut worker = PassWorker::for_mesh(&self.mesh);
         worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
         let (corners, rest) = (self.mesh.tets()[t], self.mesh.rest_volumes()[t]);
-        let [outcome, ..] =
-            self.single_view(h)
-                .tet_bundle(&mut worker, &[t as u32], &[corners], &[rest], settings);
+        // SAFETY: the view is used here, on this thread.
+        let [outcome, ..] = unsafe { self.single_view(h) }.tet_bundle(
+            &mut worker,
+            &[t as u32],
+            &[corners],
+            &[rest],
+            settings,
+        );
         self.finish_single(worker, spheres);
         outcome
     }
@@ -533,8 +545,12 @@ impl SoftBodyState {
         }
     }
 
+    /// A view for one item's impulse on this thread, outside a pass.
+    ///
+    /// # Safety
+    /// The view is used by one thread at a time.
     #[cfg(test)]
-    fn single_view(&mut self, h: f32) -> PassView<'_> {
+    unsafe fn single_view(&mut self, h: f32) -> PassView<'_> {
         self.clamp_motion.drift.resize(self.previews.len(), 0.0);
         self.clamp_motion.move_len.resize(self.previews.len(), 0.0);
         let tets = self.mesh.tet_count();
@@ -550,12 +566,13 @@ impl SoftBodyState {
             contact_kept: &self.contact_kept,
             contact_sphere: &self.contact_sphere,
             any_touching: !self.touching.is_empty(),
-            bounds: self.clamp_bounds.view(ClampRegions::Rings),
-            velocities: SharedSlice::new(&mut self.velocities),
-            previews: SharedSlice::new(&mut self.previews),
-            scratch: SharedSlice::new(&mut self.scratch),
-            drift: SharedSlice::new(&mut self.clamp_motion.drift),
-            move_len: SharedSlice::new(&mut self.clamp_motion.move_len),
+            // SAFETY (for the view and every `SharedSlice`): this function's caller's promise.
+            bounds: unsafe { self.clamp_bounds.view(ClampRegions::Rings) },
+            velocities: unsafe { SharedSlice::new(&mut self.velocities) },
+            previews: unsafe { SharedSlice::new(&mut self.previews) },
+            scratch: unsafe { SharedSlice::new(&mut self.scratch) },
+            drift: unsafe { SharedSlice::new(&mut self.clamp_motion.drift) },
+            move_len: unsafe { SharedSlice::new(&mut self.clamp_motion.move_len) },
             walks: WalkMarks {
                 walked: &self.clamp_motion.walked.0,
                 walks: &self.clamp_motion.walks.0,
@@ -564,7 +581,7 @@ impl SoftBodyState {
                 marks: &self.clamp_motion.far_nearby.0,
                 pass: self.clamp_motion.pass_number,
             },
-            ring_corrected: SharedSlice::new(&mut self.ring_corrected),
+            ring_corrected: unsafe { SharedSlice::new(&mut self.ring_corrected) },
         }
     }
 }
