@@ -81,7 +81,7 @@ pub struct ImpulseSettings {
     ///
     /// Default: 0.003 (0.3 %, a third of the 1 % the method is held to). Lower it where single
     /// tets must stay closer to their volume, at more cost per step; the figures behind the
-    /// default are in PERFORMANCE.md ("the per-tet tolerance", "rings within tolerance").
+    /// default are in PERFORMANCE.md ("The tolerances").
     pub tolerance: f32,
     /// Relative volume error of a single tet above which its ring is corrected even though the
     /// ring's volume is within `tolerance`. A ring impulse restores the ring's volume; how the
@@ -90,7 +90,7 @@ pub struct ImpulseSettings {
     /// motion at a ring impulse's full cost). Equal to `tolerance`, a ring is corrected whenever
     /// any of its tets is off by more than that.
     ///
-    /// Default: 0.01 (1 %, the error the method is held to; PERFORMANCE.md, stop 17).
+    /// Default: 0.01 (1 %, the error the method is held to; PERFORMANCE.md, "The tolerances").
     pub ring_tet_tolerance: f32,
 }
 

@@ -214,7 +214,7 @@ impl SoftBodyState {
     /// away the velocity that compresses the tets) keeps all of it (`k` = 1 while
     /// `sum m v.dv <= -1/2 sum m |dv|^2`); what only restores drifted volume, a tet crushed by
     /// a landing or a tet inverted, moves the particles back without launching them (the
-    /// measurements are in PERFORMANCE.md, "Issue 24"). One scale for the whole body, so
+    /// measurements are in PERFORMANCE.md, "The step of a physical material"). One scale for the whole body, so
     /// momentum is conserved (the impulses' `sum m dv` is zero, and so is `k` times it).
     fn volume_impulses_in_substep(
         &mut self,
