@@ -297,8 +297,7 @@ impl SoftBodyState {
     /// order. The per-tet pass's bundle order (see
     /// [`Blocks::tet_bundles`](super::tet_mesh::Blocks::tet_bundles)) made this pass twice as
     /// fast, but a sweep in index order carries a correction across the mesh in one pass, and
-    /// without it the soft cube peaked at 0.9 to 1.4 % with 7 to 11 inverted tets at 2 to 6
-    /// substeps (0.23 % and none at 2 substeps in index order): the peer keeps its accuracy.
+    /// without it the peer lost several times its accuracy (PERFORMANCE.md, "Against XPBD").
     fn project_volumes(&mut self) {
         let x = &mut self.positions;
         for (tet, &v0) in self.mesh.tets().iter().zip(self.mesh.rest_volumes()) {

@@ -2,11 +2,9 @@
 //! body's passes in blocks, each parallel section a `scope` of the pool's tasks.
 //!
 //! A step has no threads of its own and keeps none awake. An earlier design kept the pool's
-//! other threads spinning through a step (a "crew"), so that no section waited for a thread to
-//! wake up; measured against plain scopes on two threads (`bench`, interleaved runs) it gave
-//! nothing once a step's stages became one system each (16 bodies 0.61-0.71 ms against
-//! 0.64-0.85, the 9k-tet box 0.35-0.49 against 0.29-0.44), and it burned a core a game could use,
-//! so it was removed.
+//! other threads spinning through a step (a "crew") so that no section waited for a thread to
+//! wake up; it was measured no faster than plain scopes (PERFORMANCE.md, "Threads") and burned
+//! a core a game could use, so it was removed.
 
 use super::*;
 

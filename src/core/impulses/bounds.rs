@@ -94,10 +94,8 @@ pub(super) struct TetShape {
 /// volume is within `drift_bound(d, grad, reach)` of its volume there, so a ring whose error
 /// and tets stay within the tolerances by these bounds is within them now, and its check
 /// (a tet volume per tet of the ring) is skipped: the answer is known. Used in quiet bodies
-/// only (see [`QUIET_DRIFT`]). Instructions of whole `bench` runs (callgrind, the paper's
-/// method alone): the boxes settling on the ground (box_29k) 2.45 -> 1.90 billion, the 16
-/// bodies 4.57 -> 3.62, the creature 13.87 -> 13.81, the soft cube 27.34 -> 27.27 (under its
-/// sphere few particles are that still).
+/// only (see [`QUIET_DRIFT`]), where it saves about a fifth of a resting body's instructions
+/// (PERFORMANCE.md, "The fast path's skips").
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct RingCheckBound {
     pub(super) error: f32,
@@ -121,10 +119,9 @@ pub(super) const RING_CHECK_MARGIN: f32 = 0.95;
 /// the body's particles have drifted less than this fraction of their vertex radius since the
 /// bounds' start (counted by `ClampBounds::near_start`). A tet's radius is about where it loses half its
 /// volume, so a ring's tolerance (0.3 %) allows a small fraction of it, less its error. In a
-/// body that is not this still, few rings are known and the bounds cost more than they save:
-/// the soft cube under its resting sphere, with the rings' bounds on every carried pass, took
-/// 6 % more instructions, most rings failing the test and the bounds made again for each
-/// short-lived set of clamp bounds.
+/// body that is not this still, few rings are known and the bounds cost more than they save
+/// (most rings fail the test, and the bounds are made again for each short-lived set of clamp
+/// bounds).
 pub const QUIET_DRIFT: f32 = 0.005;
 
 /// See [`QUIET_DRIFT`].
@@ -158,15 +155,9 @@ impl RingCheckBound {
 /// previews step after step, or one that moves as a whole (falling, thrown, carried). The
 /// bounds hold however far the particles have gone (drifts are measured from their start, as
 /// for the per-tet pass), but the further they start from it, the fewer impulses they clear at
-/// once, so a body that changes its shape takes them afresh.
-///
-/// Taking the bounds was about a fifth of the step of a 1080-tet box resting on the ground. In
-/// that box, over 600 steps, 0.125 / 0.25 / 0.5 / 1 of the radius let 68 / 241 / 400 / 491 passes
-/// go on, and the ring pass took 43-49 / 43 / 40-42 / 38-40 us against 48 (each run twice or
-/// more, interleaved); the soft cube under its sphere, the creature and the plastic block took
-/// as long with 0.5 or 1 as without; `bench`'s 16 bodies 0.92-1.04 -> 0.78-0.81 ms and its
-/// 8640-tet box 0.39-0.40 -> 0.30-0.31 with 0.5 (one thread, three runs each). 0.5 leaves half of
-/// each radius to the pass itself.
+/// once, so a body that changes its shape takes them afresh. 0.5 leaves half of each radius to
+/// the pass itself; taking the bounds is about a fifth of a resting body's step (PERFORMANCE.md,
+/// "The fast path's skips").
 pub const CARRY_DRIFT: f32 = 0.5;
 
 /// A one-ring pass goes on from an earlier step's bounds with up to one particle in this many
@@ -174,11 +165,8 @@ pub const CARRY_DRIFT: f32 = 0.5;
 /// particles move more than the rest from step to step (over the soft cube's first 8 s, 59 of
 /// its 2 197 particles a step on average were past half their radius, and 119 of 899 one-ring
 /// passes went on). The strays are checked as any particle that drifted (their blocks' largest
-/// drift, or marked far past their radius), so the result is the same either way. Core alone,
-/// one thread, six interleaved runs each (fastest to slowest): the soft cube from 8 s
-/// 0.685-0.722 -> 0.664-0.702 ms a step, the plastic block from 5 s 0.486-0.511 -> 0.477-0.535;
-/// under the cube's sphere (from 1.5 s) and the sphere on the bar from 4 s, the same within the
-/// noise (three runs each). Bodies under 200 particles still wait for every one.
+/// drift, or marked far past their radius), so the result is the same either way. Bodies under
+/// 200 particles still wait for every one.
 pub const CARRY_STRAYS: usize = 200;
 
 impl ClampBounds {
@@ -530,15 +518,9 @@ pub(crate) struct ClampMotion {
 /// [`ClampBounds`]) drifts far: instead of raising the largest drift of its block, which every
 /// impulse of the block and of the blocks after it is checked against, it marks the particles
 /// within one edge of it, and impulses that move a marked particle go to the per-vertex checks
-/// (which a particle past its own radius fails anyway).
-///
-/// In the soft cube the mean drift at the end of a one-ring pass is an eightieth of the mean
-/// vertex radius, but a few particles a pass (1.5 past their radius, 15 past a quarter of it)
-/// raised their blocks' largest drift past the radius of every region: 1 260 of 2 757 clamps
-/// a step went to the per-vertex checks, 1 104 of them to be cleared there. With the marks,
-/// 520 go and 390 are cleared; the step is 5 to 7 % shorter (cube, creature; 0.25, 0.6 and 1
-/// tried: 1 is as fast as 0.6 and faster than 0.25, whose marks send more impulses to the
-/// checks than the drifts they keep out of the bound).
+/// (which a particle past its own radius fails anyway). A few particles a pass drift that far
+/// while the mean drift is a small fraction of the radius; without the marks they would send
+/// most of their blocks' impulses to the checks (PERFORMANCE.md, "The fast path's skips").
 pub(super) const FAR_DRIFT: f32 = 1.0;
 
 /// One number per particle or tet, the pass or walk that last marked it (see
@@ -652,7 +634,7 @@ impl FarDrift<'_> {
 /// Aligned to two cache lines (the prefetcher pulls lines in pairs): the workers of tasks that
 /// run at the same time are neighbours in one array, and each writes its counters and largest
 /// drift with every impulse; sharing a line, two threads would take it from each other each
-/// time (about 2 % of the two-thread step in the soft cube, within the noise of one run).
+/// time.
 #[derive(Clone, Debug, Default)]
 #[repr(align(128))]
 pub(crate) struct PassWorker {

@@ -34,8 +34,8 @@ pub enum Resolution {
 }
 
 impl Default for Resolution {
-    /// About 6000 tets: the paper's armadillo has 6510, and the new method steps it in about
-    /// 2 ms on one core.
+    /// About 6000 tets: the paper's armadillo has 6510, and a body of that size steps within
+    /// a frame's physics budget on one core.
     fn default() -> Self {
         Resolution::TargetTets(6000)
     }
