@@ -104,7 +104,7 @@ pub struct Blocks {
     pub bundle_corners: Vec<[u32; 4]>,
     /// See [`Blocks::bundle_corners`].
     pub bundle_rest_volumes: Vec<f32>,
-    /// Springs (indices into [`TetMesh::edges`]) of each task, in the order of their bundles
+    /// Springs (indices into [`TetMesh::edges`](super::tet_mesh::TetMesh::edges)) of each task, in the order of their bundles
     /// of [`LANES`] that share no vertex (see [`bundle_disjoint`]), without the padding. The
     /// mesh numbers its edges in this order, so the rows hold `0, 1, 2, ...` one after another.
     pub edges: Csr,
@@ -129,7 +129,7 @@ const BUNDLE_LOOK_AHEAD: usize = 128;
 /// are interleaved (the first tet of each part, then the second of each, ...), so that a
 /// bundle's tets come from parts of the block far apart; then each bundle starts with the
 /// first tet not yet bundled and takes the next ones that share no vertex with it, looking at
-/// most [`BUNDLE_LOOK_AHEAD`] tets ahead. Each lane walks its part in order (neighbouring tets
+/// most `BUNDLE_LOOK_AHEAD` tets ahead. Each lane walks its part in order (neighbouring tets
 /// share cache lines), and few lanes stay empty, even at the end.
 pub fn bundle_disjoint<const N: usize>(tets: &[[u32; N]], row: &[u32]) -> Vec<u32> {
     let part = row.len().div_ceil(LANES);

@@ -63,7 +63,8 @@ pub struct StepCounters {
     pub non_finite_velocities: u32,
 }
 
-/// One soft body: the particles of its tet mesh and the springs on its edges.
+/// One soft body: the particles of its tet mesh, the springs on its edges, its material and
+/// what it touches; a step's working memory is apart, in `StepScratch`.
 #[derive(Clone, Debug)]
 pub struct SoftBodyState {
     pub(crate) mesh: Arc<TetMesh>,
@@ -90,21 +91,9 @@ pub struct SoftBodyState {
     pub(crate) edge_compliance: Vec<f32>,
     /// Each spring's damper (N s/m).
     pub(crate) edge_damping: Vec<f32>,
-    /// Each spring's unit direction this step (zero for a spring of no length), from its force
-    /// to its damper: one root and one division per spring instead of two.
-    pub(crate) spring_directions: Vec<Vec3>,
     pub(crate) material: SoftBodyMaterial,
-    /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
-    /// passes. Kept zero between uses so that the passes never clear the whole array.
-    pub(crate) scratch: Vec<Vec3>,
     /// Per particle, the outward unit normal of what it touches this step (zero if nothing).
     pub(crate) contact_normals: Vec<Vec3>,
-    /// Previewed positions `x + h v` during the volume passes, kept in step with every velocity
-    /// change there (`apply_velocity_change`), so the passes read one array, not two.
-    /// Four numbers each, so that four are gathered into SIMD lanes with a load each.
-    pub(crate) previews: Vec<Point4>,
-    /// Bounds that let most impulses skip the neighbour clamp (see `impulses.rs`).
-    pub(crate) clamp_bounds: super::impulses::ClampBounds,
     /// Per particle in contact, the share `f` of a push into the contact that the particle keeps:
     /// 0 against a static collider, `w_s / (w_p + w_s)` against a sphere.
     pub(crate) contact_kept: Vec<f32>,
@@ -116,19 +105,9 @@ pub struct SoftBodyState {
     pub(crate) contact_sphere: Vec<u32>,
     /// The particles with a non-zero entry in `contact_normals`, to clear them cheaply.
     pub(crate) touching: Vec<u32>,
-    /// What the clamp bounds track per particle while a volume pass runs.
-    pub(crate) clamp_motion: ClampMotion,
-    /// One per block of the mesh: what each job of a volume pass owns.
-    pub(crate) pass_workers: Vec<PassWorker>,
-    /// One per block and phase: whether its job in the running pass is done.
-    pub(crate) block_done: BlockFlags,
     pub(crate) counters: StepCounters,
     /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
     pub(crate) gravity: Vec3,
-    /// Sphere positions saved during an XPBD substep (reused, so steps do not allocate).
-    pub(crate) sphere_positions: Vec<Vec3>,
-    /// One per chunk of particles: what each job of the contacts and the integration found.
-    pub(crate) chunk_findings: Vec<ChunkFindings>,
     /// When the body counts as running away (see `runaway.rs`).
     pub(crate) runaway_limits: super::runaway::RunawayLimits,
     /// The runaway caught in this step, if any.
@@ -139,14 +118,47 @@ pub struct SoftBodyState {
     pub(crate) rest_extent: f32,
     /// The shortest rest edge, for the substeps a fast body needs.
     pub(crate) shortest_edge: f32,
+    /// Whether the body sleeps, and for how long it has been quiet (see `sleep.rs`).
+    pub(crate) sleep: super::sleep::Sleep,
+    /// A step's working memory and the caches that only save it work (see [`StepScratch`]).
+    pub(crate) scratch: StepScratch,
+}
+
+/// A step's working memory, and what a step keeps from the last only to save work (clamp
+/// bounds, the guess of which rings need correcting, the shape model's bundles): none of it is
+/// the body's physical state; what it carries between steps decides how much work a step does,
+/// not what it computes (the tests hold every shortcut to the plain passes). Kept in the body
+/// so that a step allocates nothing.
+#[derive(Clone, Debug)]
+pub(crate) struct StepScratch {
+    /// Each spring's unit direction this step (zero for a spring of no length), from its force
+    /// to its damper: one root and one division per spring instead of two.
+    pub(crate) spring_directions: Vec<Vec3>,
+    /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
+    /// passes. Kept zero between uses so that the passes never clear the whole array.
+    pub(crate) per_particle: Vec<Vec3>,
+    /// Previewed positions `x + h v` during the volume passes, kept in step with every velocity
+    /// change there (`apply_velocity_change`), so the passes read one array, not two.
+    /// Four numbers each, so that four are gathered into SIMD lanes with a load each.
+    pub(crate) previews: Vec<Point4>,
+    /// Bounds that let most impulses skip the neighbour clamp (see `impulses/bounds.rs`).
+    pub(crate) clamp_bounds: super::impulses::ClampBounds,
+    /// What the clamp bounds track per particle while a volume pass runs.
+    pub(crate) clamp_motion: ClampMotion,
+    /// One per block of the mesh: what each job of a volume pass owns.
+    pub(crate) pass_workers: Vec<PassWorker>,
+    /// One per block and phase: whether its job in the running pass is done.
+    pub(crate) block_done: BlockFlags,
+    /// Sphere positions saved during an XPBD substep (reused, so steps do not allocate).
+    pub(crate) sphere_positions: Vec<Vec3>,
+    /// One per chunk of particles: what each job of the contacts and the integration found.
+    pub(crate) chunk_findings: Vec<ChunkFindings>,
     /// Velocities before a substep's volume impulses (see `xpbd.rs`).
     pub(crate) substep_velocities: Vec<Vec3>,
     /// Per vertex, whether its ring was past its tolerance when its impulse last checked it:
     /// a guess of whether it will be again, which decides only how the check is computed,
     /// never its result (see `PassView::ring_impulse`).
     pub(crate) ring_corrected: Vec<bool>,
-    /// Whether the body sleeps, and for how long it has been quiet (see `sleep.rs`).
-    pub(crate) sleep: super::sleep::Sleep,
     /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
     pub(crate) shape_bundles: Vec<super::deviatoric::ShapeBundle>,
 }
@@ -175,35 +187,37 @@ impl SoftBodyState {
             edge_stiffness: vec![0.0; spring_rest0.len()],
             edge_compliance: vec![0.0; spring_rest0.len()],
             edge_damping: vec![0.0; spring_rest0.len()],
-            spring_directions: vec![Vec3::ZERO; spring_rest0.len()],
             spring_rest0,
             material,
-            scratch: vec![Vec3::ZERO; n],
             contact_normals: vec![Vec3::ZERO; n],
-            previews: vec![Point4::default(); n],
-            clamp_bounds: Default::default(),
             contact_kept: vec![0.0; n],
             friction_anchors: vec![Vec3::NAN; n],
             contact_sphere: vec![u32::MAX; n],
             touching: Vec::with_capacity(n),
-            clamp_motion: ClampMotion::default(),
-            pass_workers: vec![PassWorker::for_mesh(&mesh); mesh.blocks().count()],
-            block_done: BlockFlags::new(2 * mesh.blocks().count()),
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
-            sphere_positions: Vec::new(),
-            chunk_findings: ChunkFindings::for_particles(n),
-            ring_corrected: vec![false; n],
             sleep: super::sleep::Sleep::new(Some(Default::default()), n),
             runaway_limits: Default::default(),
             runaway: None,
             sane_centre: None,
             shortest_edge,
-            substep_velocities: vec![Vec3::ZERO; n],
-            shape_bundles: super::deviatoric::shape_bundles(&mesh),
             rest_extent: {
                 let (lo, hi) = mesh.bounds();
                 (hi - lo).length()
+            },
+            scratch: StepScratch {
+                spring_directions: vec![Vec3::ZERO; mesh.edges().len()],
+                per_particle: vec![Vec3::ZERO; n],
+                previews: vec![Point4::default(); n],
+                clamp_bounds: Default::default(),
+                clamp_motion: ClampMotion::default(),
+                pass_workers: vec![PassWorker::for_mesh(&mesh); mesh.blocks().count()],
+                block_done: BlockFlags::new(2 * mesh.blocks().count()),
+                sphere_positions: Vec::new(),
+                chunk_findings: ChunkFindings::for_particles(n),
+                ring_corrected: vec![false; n],
+                substep_velocities: vec![Vec3::ZERO; n],
+                shape_bundles: super::deviatoric::shape_bundles(&mesh),
             },
             mesh,
         };
@@ -392,7 +406,7 @@ impl SoftBodyState {
         self.counters = StepCounters::default();
         self.runaway = None;
         self.previous_positions.copy_from_slice(&self.positions);
-        self.clamp_bounds.taken_this_step = false;
+        self.scratch.clamp_bounds.taken_this_step = false;
         for &i in &self.touching {
             self.contact_normals[i as usize] = Vec3::ZERO;
             self.contact_sphere[i as usize] = u32::MAX;
@@ -438,19 +452,24 @@ impl SoftBodyState {
         // SAFETY: each job reads and writes only its own chunk's particles.
         let positions = unsafe { SharedSlice::new(&mut self.positions) };
         let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
-        in_particle_chunks(parallel, &mut self.chunk_findings, n, |found, particles| {
-            for i in particles {
-                let next = positions.get(i) + h * velocities.get(i);
-                if next.is_finite() {
-                    positions.set(i, next);
-                } else {
-                    // The particle stays where it is (still finite) and stops.
-                    velocities.set(i, Vec3::ZERO);
-                    found.non_finite += 1;
+        in_particle_chunks(
+            parallel,
+            &mut self.scratch.chunk_findings,
+            n,
+            |found, particles| {
+                for i in particles {
+                    let next = positions.get(i) + h * velocities.get(i);
+                    if next.is_finite() {
+                        positions.set(i, next);
+                    } else {
+                        // The particle stays where it is (still finite) and stops.
+                        velocities.set(i, Vec3::ZERO);
+                        found.non_finite += 1;
+                    }
                 }
-            }
-        });
-        for found in &mut self.chunk_findings {
+            },
+        );
+        for found in &mut self.scratch.chunk_findings {
             self.counters.non_finite_velocities += std::mem::take(&mut found.non_finite);
         }
         self.catch_runaway();
@@ -461,12 +480,13 @@ impl SoftBodyState {
     #[cfg(test)]
     #[inline]
     pub(crate) fn preview(&self, i: u32) -> Vec3 {
-        self.previews[i as usize].vec3()
+        self.scratch.previews[i as usize].vec3()
     }
 
     /// Sets every previewed position to `x + h v`.
     pub(crate) fn refresh_previews(&mut self, h: f32) {
         for ((xp, x), v) in self
+            .scratch
             .previews
             .iter_mut()
             .zip(&self.positions)

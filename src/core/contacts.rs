@@ -14,7 +14,7 @@
 //! body carry it.
 //!
 //! Friction against a static collider holds a particle where it stands, not only its velocity
-//! (see [`static_friction`]): with velocity-only friction the volume impulses' small pushes at
+//! (see `static_friction`): with velocity-only friction the volume impulses' small pushes at
 //! a resting body's base, each stopped by friction only while it pressed into the ground, made
 //! the body walk across the ground and never come to rest (PERFORMANCE.md, stop 30). Against a
 //! sphere, friction is Coulomb's on the relative velocity.
@@ -37,7 +37,7 @@ pub struct ColliderInstance {
     pub shape: SharedShape,
     /// Its pose in the world.
     pub pose: Pose,
-    /// Its world bounds (from [`StaticColliderRef::new`]), to skip far particles cheaply.
+    /// Its world bounds (from [`ColliderInstance::new`]), to skip far particles cheaply.
     pub aabb: Aabb,
     /// Its friction coefficient.
     pub friction: f32,
@@ -229,40 +229,46 @@ impl SoftBodyState {
         let kept = unsafe { SharedSlice::new(&mut self.contact_kept) };
         let sphere = unsafe { SharedSlice::new(&mut self.contact_sphere) };
         let anchors = unsafe { SharedSlice::new(&mut self.friction_anchors) };
-        in_particle_chunks(parallel, &mut self.chunk_findings, n, |found, particles| {
-            for i in particles {
-                if inv_masses[i] == 0.0 {
-                    continue;
-                }
-                let mut touched = false;
-                for c in colliders {
-                    let x = positions[i];
-                    let xp = x + h * velocities.get(i);
-                    let Some((depth, normal)) = c.penetration(xp) else {
+        in_particle_chunks(
+            parallel,
+            &mut self.scratch.chunk_findings,
+            n,
+            |found, particles| {
+                for i in particles {
+                    if inv_masses[i] == 0.0 {
                         continue;
-                    };
-                    touched = true;
-                    let v = velocities.get(i) + normal * (depth / h);
-                    let mu = combined_friction(friction, c.friction);
-                    let (v, anchor) = static_friction(x, v, normal, depth, mu, h, anchors.get(i));
-                    velocities.set(i, v);
-                    anchors.set(i, anchor);
-                    // As `record_contact`, with the new ones listed by the job.
-                    if normals.get(i) == Vec3::ZERO {
-                        found.new_touching.push(i as u32);
                     }
-                    normals.set(i, normal);
-                    kept.set(i, 0.0);
-                    sphere.set(i, u32::MAX);
-                    found.contacts += 1;
+                    let mut touched = false;
+                    for c in colliders {
+                        let x = positions[i];
+                        let xp = x + h * velocities.get(i);
+                        let Some((depth, normal)) = c.penetration(xp) else {
+                            continue;
+                        };
+                        touched = true;
+                        let v = velocities.get(i) + normal * (depth / h);
+                        let mu = combined_friction(friction, c.friction);
+                        let (v, anchor) =
+                            static_friction(x, v, normal, depth, mu, h, anchors.get(i));
+                        velocities.set(i, v);
+                        anchors.set(i, anchor);
+                        // As `record_contact`, with the new ones listed by the job.
+                        if normals.get(i) == Vec3::ZERO {
+                            found.new_touching.push(i as u32);
+                        }
+                        normals.set(i, normal);
+                        kept.set(i, 0.0);
+                        sphere.set(i, u32::MAX);
+                        found.contacts += 1;
+                    }
+                    if !touched {
+                        anchors.set(i, Vec3::NAN);
+                    }
                 }
-                if !touched {
-                    anchors.set(i, Vec3::NAN);
-                }
-            }
-        });
+            },
+        );
         let mut contacts = 0;
-        for found in &mut self.chunk_findings {
+        for found in &mut self.scratch.chunk_findings {
             self.touching.extend_from_slice(&found.new_touching);
             found.new_touching.clear();
             contacts += std::mem::take(&mut found.contacts);

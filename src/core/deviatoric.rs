@@ -17,7 +17,7 @@
 //! `F` by `dlambda A S` with `S = sum w_i g_i g_i^T`: `F` is kept current without re-reading
 //! the positions.
 //!
-//! The tets are projected four at a time in SIMD lanes ([`ShapeBundle`]: four tets that share
+//! The tets are projected four at a time in SIMD lanes (`ShapeBundle`: four tets that share
 //! no vertex, the same result as one after another), in bundles taken in index order: a sweep
 //! in index order carries a correction across the mesh in one pass, which the volume passes'
 //! blocks' order does not (PERFORMANCE.md, stop 32).
@@ -242,7 +242,7 @@ impl SoftBodyState {
     /// (kinematic particles have none).
     pub(crate) fn refresh_shape_bundles(&mut self) {
         let w = &self.inv_masses;
-        for b in &mut self.shape_bundles {
+        for b in &mut self.scratch.shape_bundles {
             b.inv_masses = std::array::from_fn(|k| {
                 f32x4::new(std::array::from_fn(|l| {
                     if b.filled[l] { w[b.corners[k][l]] } else { 0.0 }
@@ -268,11 +268,11 @@ impl SoftBodyState {
     /// `gamma` XPBD's damping term. Needs `refresh_shape_bundles` this step.
     pub(crate) fn project_tet_shapes(&mut self, compliance: [f32; 2], hs2: f32, gamma: f32) {
         let x = &mut self.positions;
-        let start = &self.previews;
+        let start = &self.scratch.previews;
         let gamma = f32x4::splat(gamma);
         let one_plus_gamma = f32x4::ONE + gamma;
         let half = f32x4::splat(0.5);
-        for b in &self.shape_bundles {
+        for b in &self.scratch.shape_bundles {
             let g = &b.gradients;
             // Written out, not mapped: a closure per lane was not inlined.
             let corner = |[a, b, c, d]: [usize; LANES]| Vec3x4::from_vecs([x[a], x[b], x[c], x[d]]);
@@ -388,7 +388,7 @@ mod tests {
         body.masses = vec![1.0, 2.0, 3.0, 4.0];
         body.inv_masses = body.masses.iter().map(|m| 1.0 / m).collect();
         body.map_positions(&deform);
-        for (p, &x) in body.previews.iter_mut().zip(&body.positions) {
+        for (p, &x) in body.scratch.previews.iter_mut().zip(&body.positions) {
             *p = super::super::lanes::Point4::new(x);
         }
         body.refresh_shape_bundles();

@@ -68,12 +68,12 @@ impl SoftBodyState {
         // dampers' phases a block runs after every block it shares a particle with
         // (`waits_for`), and writes only its own edges' directions; in the particles' phases
         // each chunk touches its own particles.
-        let forces = unsafe { SharedSlice::new(&mut self.scratch) };
+        let forces = unsafe { SharedSlice::new(&mut self.scratch.per_particle) };
         let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
-        let directions = unsafe { SharedSlice::new(&mut self.spring_directions) };
+        let directions = unsafe { SharedSlice::new(&mut self.scratch.spring_directions) };
         let n = x.len();
         let chunks = n.div_ceil(PARTICLE_CHUNK);
-        let (springs_done, dampers_done) = self.block_done.split_at(count);
+        let (springs_done, dampers_done) = self.scratch.block_done.split_at(count);
         let phases = [
             Phase {
                 tasks: count,

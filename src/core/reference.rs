@@ -10,7 +10,7 @@
 //! a tet needs no impulse ([`ImpulseSettings::tolerance`]), the ring step limit
 //! ([`RING_STEP_LIMIT`]), the root a step may use (the one reached while the volume moves
 //! monotonically towards its rest value, [`super::roots::monotone_root`]), directions reduced
-//! where a particle presses into a contact, and the clamp's floor ([`clamp_floor`]). The
+//! where a particle presses into a contact, and the clamp's floor (`clamp_floor`). The
 //! volumes are rounded as the fast passes round them (`f32`, from a ring's centre), since a
 //! ring's error is a small difference of large volumes. The paper fixes no order of the
 //! vertices and tets: this one takes them in the order the fast passes do (the mesh's

@@ -152,7 +152,7 @@ impl SoftBodyState {
                 if self.inv_masses[i] > 0.0 {
                     self.velocities[i] += hs * gravity;
                 }
-                self.previews[i] = Point4::new(self.positions[i]);
+                self.scratch.previews[i] = Point4::new(self.positions[i]);
                 self.positions[i] += hs * self.velocities[i];
             }
             match tet_compliance {
@@ -164,23 +164,23 @@ impl SoftBodyState {
             }
             // Velocities from the motion, then contacts on them from the substep's start.
             for i in 0..self.positions.len() {
-                let v = (self.positions[i] - self.previews[i].vec3()) / hs;
+                let v = (self.positions[i] - self.scratch.previews[i].vec3()) / hs;
                 if v.is_finite() {
                     self.velocities[i] = v;
                 } else {
                     self.velocities[i] = Vec3::ZERO;
                     self.counters.non_finite_velocities += 1;
                 }
-                self.positions[i] = self.previews[i].vec3();
+                self.positions[i] = self.scratch.previews[i].vec3();
             }
             // Each sphere where it is at this substep's start, then back exactly where it was.
-            self.sphere_positions.clear();
+            self.scratch.sphere_positions.clear();
             for s in spheres.iter_mut() {
-                self.sphere_positions.push(s.position);
+                self.scratch.sphere_positions.push(s.position);
                 s.position += (k as f32 * hs) * s.velocity;
             }
             contacts += self.resolve_sphere_contacts(hs, spheres);
-            for (s, &start) in spheres.iter_mut().zip(&self.sphere_positions) {
+            for (s, &start) in spheres.iter_mut().zip(&self.scratch.sphere_positions) {
                 s.position = start;
             }
             contacts += self.resolve_static_contacts(hs, colliders);
@@ -222,14 +222,16 @@ impl SoftBodyState {
         spheres: &mut [RigidSphereState],
         parallel: &dyn Parallel,
     ) {
-        self.substep_velocities.copy_from_slice(&self.velocities);
+        self.scratch
+            .substep_velocities
+            .copy_from_slice(&self.velocities);
         self.one_ring_impulses(hs, spheres, parallel);
         self.per_tet_impulses(hs, spheres, parallel);
         let (mut along, mut squared) = (0.0f64, 0.0f64);
         for ((&v, &before), &m) in self
             .velocities
             .iter()
-            .zip(&self.substep_velocities)
+            .zip(&self.scratch.substep_velocities)
             .zip(&self.masses)
         {
             let dv = v - before;
@@ -245,7 +247,7 @@ impl SoftBodyState {
             .positions
             .iter_mut()
             .zip(&mut self.velocities)
-            .zip(&self.substep_velocities)
+            .zip(&self.scratch.substep_velocities)
         {
             *x += hs * *v;
             *v = before + k * (*v - before);
@@ -262,7 +264,7 @@ impl SoftBodyState {
     /// undamped one when it is zero.
     fn project_edges(&mut self, hs2: f32, gamma: f32) {
         let x = &mut self.positions;
-        let start = &self.previews;
+        let start = &self.scratch.previews;
         let edges = self.mesh.edges();
         for &e in self.mesh.blocks().edges.items() {
             let e = e as usize;

@@ -139,7 +139,7 @@ pub(super) fn prepare(
 /// once in [`SoftBodySystems::Prepare`]. The spheres are changed by the contact and volume passes
 /// (particles pressed against a sphere move it) and written back in [`SoftBodySystems::Writeback`];
 /// the colliders do not move within a step. Also the bodies' entities, scratch for the parallel
-/// stages ([`for_each_body`]). The buffers are reused, so a step does not allocate.
+/// stages (`for_each_body`). The buffers are reused, so a step does not allocate.
 #[derive(Resource, Default)]
 pub struct SolverSpheres {
     pub(super) entities: Vec<Entity>,

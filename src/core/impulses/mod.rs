@@ -169,7 +169,7 @@ impl SoftBodyState {
         let regions = settings.neighbour_clamp.then_some(ClampRegions::Rings);
         let mesh = self.mesh.clone();
         // The per-tet pass, if it runs, goes on from this pass's clamp bounds.
-        self.clamp_bounds.keep_for_tets = settings.per_tet && settings.gamma != 0.0;
+        self.scratch.clamp_bounds.keep_for_tets = settings.per_tet && settings.gamma != 0.0;
         self.run_blocks(
             h,
             spheres,
@@ -261,17 +261,17 @@ impl SoftBodyState {
         items: &Csr,
         impulse: &BlockImpulses<'_>,
     ) {
-        for worker in &mut self.pass_workers {
+        for worker in &mut self.scratch.pass_workers {
             worker.counters = StepCounters::default();
             worker.max_moved = 0.0;
             worker.sphere_dv.clear();
             worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
         }
         #[cfg(test)]
-        let clamp_regions = clamp_regions.filter(|_| !self.clamp_bounds.disabled);
+        let clamp_regions = clamp_regions.filter(|_| !self.scratch.clamp_bounds.disabled);
         let take_tet_regions =
-            clamp_regions == Some(ClampRegions::Tets) || self.clamp_bounds.keep_for_tets;
-        self.clamp_bounds.keep_for_tets = false;
+            clamp_regions == Some(ClampRegions::Tets) || self.scratch.clamp_bounds.keep_for_tets;
+        self.scratch.clamp_bounds.keep_for_tets = false;
         // A per-tet pass after its step's one-ring pass goes on from the bounds that pass took
         // (they hold as long as drifts are measured from where they were taken): it only
         // measures each particle's drift again. Taking them costs about as much as the
@@ -281,15 +281,18 @@ impl SoftBodyState {
         // whether it can go on from earlier bounds.
         let mut quiet_body = false;
         let carry = match clamp_regions {
-            Some(ClampRegions::Tets) => self.clamp_bounds.taken_this_step,
+            Some(ClampRegions::Tets) => self.scratch.clamp_bounds.taken_this_step,
             Some(ClampRegions::Rings) => {
-                if self.clamp_bounds.kept {
-                    self.clamp_bounds.follow_translation(&self.previews);
+                if self.scratch.clamp_bounds.kept {
+                    self.scratch
+                        .clamp_bounds
+                        .follow_translation(&self.scratch.previews);
                 }
                 let (carry, quiet) = self
+                    .scratch
                     .clamp_bounds
-                    .still_hold(take_tet_regions, &self.previews);
-                quiet_body = quiet as f32 >= QUIET_SHARE * self.previews.len() as f32;
+                    .still_hold(take_tet_regions, &self.scratch.previews);
+                quiet_body = quiet as f32 >= QUIET_SHARE * self.scratch.previews.len() as f32;
                 carry
             }
             None => false,
@@ -298,13 +301,16 @@ impl SoftBodyState {
         // within their tolerances (see `RingCheckBound`); the first such pass computes what it
         // needs from the bounds' start, in the bounds' first two phases.
         let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
-        let shapes = ring_checks && !self.clamp_bounds.ring_checks_ready;
+        let shapes = ring_checks && !self.scratch.clamp_bounds.ring_checks_ready;
         let blocks = self.mesh.blocks();
         if clamp_regions.is_some() {
-            self.clamp_bounds
-                .reserve(&self.mesh, blocks.count(), &mut self.clamp_motion);
-            self.clamp_bounds.active = true;
-            self.clamp_motion.next_pass();
+            self.scratch.clamp_bounds.reserve(
+                &self.mesh,
+                blocks.count(),
+                &mut self.scratch.clamp_motion,
+            );
+            self.scratch.clamp_bounds.active = true;
+            self.scratch.clamp_motion.next_pass();
         }
         {
             let mesh = &*self.mesh;
@@ -317,26 +323,28 @@ impl SoftBodyState {
             // one-ring or tets it shares (`waits_for`), and writes only the particles, tets and
             // block entries of its own items and their one-rings; each task has its own worker.
             let mut bounds = unsafe {
-                self.clamp_bounds
+                self.scratch
+                    .clamp_bounds
                     .view(clamp_regions.unwrap_or(ClampRegions::Rings))
             };
             bounds.ring_checks = ring_checks;
             let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
-            let previews = unsafe { SharedSlice::new(&mut self.previews) };
-            let scratch = unsafe { SharedSlice::new(&mut self.scratch) };
-            let drift = unsafe { SharedSlice::new(&mut self.clamp_motion.drift) };
-            let move_len = unsafe { SharedSlice::new(&mut self.clamp_motion.move_len) };
+            let previews = unsafe { SharedSlice::new(&mut self.scratch.previews) };
+            let scratch = unsafe { SharedSlice::new(&mut self.scratch.per_particle) };
+            let drift = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) };
+            let move_len = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) };
             let walks = WalkMarks {
-                walked: &self.clamp_motion.walked.0,
-                walks: &self.clamp_motion.walks.0,
+                walked: &self.scratch.clamp_motion.walked.0,
+                walks: &self.scratch.clamp_motion.walks.0,
             };
-            let block_drift = unsafe { SharedSlice::new(&mut self.clamp_motion.block_drift) };
-            let ring_corrected = unsafe { SharedSlice::new(&mut self.ring_corrected) };
+            let block_drift =
+                unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.block_drift) };
+            let ring_corrected = unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) };
             let far = FarDrift {
-                marks: &self.clamp_motion.far_nearby.0,
-                pass: self.clamp_motion.pass_number,
+                marks: &self.scratch.clamp_motion.far_nearby.0,
+                pass: self.scratch.clamp_motion.pass_number,
             };
-            let workers = unsafe { SharedSlice::new(&mut self.pass_workers) };
+            let workers = unsafe { SharedSlice::new(&mut self.scratch.pass_workers) };
             let waits_for = &mesh.blocks().waits_for;
             let count = items.len();
             // The clamp bounds are computed first, in chunks: the tets', then the vertices'
@@ -380,7 +388,7 @@ impl SoftBodyState {
                 }),
                 Phase {
                     tasks: count,
-                    order: Some((waits_for, &self.block_done[..count])),
+                    order: Some((waits_for, &self.scratch.block_done[..count])),
                 },
             ];
             run_phases(parallel, &phases, &|phase, task| {
@@ -450,8 +458,8 @@ impl SoftBodyState {
                 }
             });
         }
-        self.clamp_bounds.active = false;
-        let bounds = &mut self.clamp_bounds;
+        self.scratch.clamp_bounds.active = false;
+        let bounds = &mut self.scratch.clamp_bounds;
         match (clamp_regions, carry) {
             (Some(ClampRegions::Rings), false) => {
                 bounds.taken_this_step = take_tet_regions;
@@ -477,7 +485,7 @@ impl SoftBodyState {
             _ => {}
         }
         let c = &mut self.counters;
-        for worker in &self.pass_workers {
+        for worker in &self.scratch.pass_workers {
             let w = &worker.counters;
             c.rings_corrected += w.rings_corrected;
             c.rings_without_root += w.rings_without_root;
@@ -551,10 +559,17 @@ impl SoftBodyState {
     /// The view is used by one thread at a time.
     #[cfg(test)]
     unsafe fn single_view(&mut self, h: f32) -> PassView<'_> {
-        self.clamp_motion.drift.resize(self.previews.len(), 0.0);
-        self.clamp_motion.move_len.resize(self.previews.len(), 0.0);
+        self.scratch
+            .clamp_motion
+            .drift
+            .resize(self.scratch.previews.len(), 0.0);
+        self.scratch
+            .clamp_motion
+            .move_len
+            .resize(self.scratch.previews.len(), 0.0);
         let tets = self.mesh.tet_count();
-        self.clamp_motion
+        self.scratch
+            .clamp_motion
             .walked
             .0
             .resize_with(tets, || AtomicU32::new(0));
@@ -567,21 +582,21 @@ impl SoftBodyState {
             contact_sphere: &self.contact_sphere,
             any_touching: !self.touching.is_empty(),
             // SAFETY (for the view and every `SharedSlice`): this function's caller's promise.
-            bounds: unsafe { self.clamp_bounds.view(ClampRegions::Rings) },
+            bounds: unsafe { self.scratch.clamp_bounds.view(ClampRegions::Rings) },
             velocities: unsafe { SharedSlice::new(&mut self.velocities) },
-            previews: unsafe { SharedSlice::new(&mut self.previews) },
-            scratch: unsafe { SharedSlice::new(&mut self.scratch) },
-            drift: unsafe { SharedSlice::new(&mut self.clamp_motion.drift) },
-            move_len: unsafe { SharedSlice::new(&mut self.clamp_motion.move_len) },
+            previews: unsafe { SharedSlice::new(&mut self.scratch.previews) },
+            scratch: unsafe { SharedSlice::new(&mut self.scratch.per_particle) },
+            drift: unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) },
+            move_len: unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) },
             walks: WalkMarks {
-                walked: &self.clamp_motion.walked.0,
-                walks: &self.clamp_motion.walks.0,
+                walked: &self.scratch.clamp_motion.walked.0,
+                walks: &self.scratch.clamp_motion.walks.0,
             },
             far: FarDrift {
-                marks: &self.clamp_motion.far_nearby.0,
-                pass: self.clamp_motion.pass_number,
+                marks: &self.scratch.clamp_motion.far_nearby.0,
+                pass: self.scratch.clamp_motion.pass_number,
             },
-            ring_corrected: unsafe { SharedSlice::new(&mut self.ring_corrected) },
+            ring_corrected: unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) },
         }
     }
 }

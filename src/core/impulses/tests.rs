@@ -78,7 +78,7 @@ fn every_impulse_conserves_momentum() {
     }
     assert!(applied > 50, "only {applied} ring impulses were applied");
     // The scratch directions are left clean.
-    assert!(body.scratch.iter().all(|&d| d == Vec3::ZERO));
+    assert!(body.scratch.per_particle.iter().all(|&d| d == Vec3::ZERO));
 }
 
 #[test]
@@ -322,16 +322,16 @@ fn the_guess_of_which_rings_are_corrected_changes_nothing() {
     for strength in [0.05, 0.5, 4.0] {
         let mut none = shaken_body(strength);
         let mut all = shaken_body(strength);
-        all.ring_corrected.fill(true);
+        all.scratch.ring_corrected.fill(true);
         for body in [&mut none, &mut all] {
             for _ in 0..3 {
                 passes_with_a_push_between(body, 7, strength);
             }
         }
         assert_eq!(none.velocities, all.velocities, "strength {strength}");
-        assert_eq!(none.ring_corrected, all.ring_corrected);
-        let corrected = none.ring_corrected.iter().filter(|&&c| c).count();
-        assert!(corrected > 0 && corrected < none.ring_corrected.len());
+        assert_eq!(none.scratch.ring_corrected, all.scratch.ring_corrected);
+        let corrected = none.scratch.ring_corrected.iter().filter(|&&c| c).count();
+        assert!(corrected > 0 && corrected < none.scratch.ring_corrected.len());
     }
 }
 
@@ -340,7 +340,7 @@ fn the_clamp_shortcut_changes_nothing() {
     for strength in [0.05, 0.5, 4.0] {
         let mut fast = shaken_body(strength);
         let mut exact = shaken_body(strength);
-        exact.clamp_bounds.disabled = true;
+        exact.scratch.clamp_bounds.disabled = true;
         for body in [&mut fast, &mut exact] {
             passes_with_a_push_between(body, 7, strength);
         }
@@ -368,7 +368,7 @@ fn the_per_tet_pass_going_on_from_the_ring_passs_bounds_changes_nothing() {
             },
         );
         let mut exact = fast.clone();
-        exact.clamp_bounds.disabled = true;
+        exact.scratch.clamp_bounds.disabled = true;
         for body in [&mut fast, &mut exact] {
             passes_with_a_push_between(body, 5, strength);
         }
@@ -396,8 +396,8 @@ fn one_ring_passes_going_on_from_earlier_steps_bounds_change_nothing() {
         let mut fast = shaken_body(strength);
         let mut exact = fast.clone();
         let mut by_rule = fast.clone();
-        fast.clamp_bounds.always_carry = true;
-        exact.clamp_bounds.disabled = true;
+        fast.scratch.clamp_bounds.always_carry = true;
+        exact.scratch.clamp_bounds.disabled = true;
         for step in 0..8 {
             for body in [&mut fast, &mut exact, &mut by_rule] {
                 body.begin_step();
@@ -416,8 +416,8 @@ fn one_ring_passes_going_on_from_earlier_steps_bounds_change_nothing() {
             }
             clamped += exact.counters().rings_clamped + exact.counters().tets_clamped;
         }
-        carried += fast.clamp_bounds.carried_passes;
-        let by_rule = by_rule.clamp_bounds.carried_passes;
+        carried += fast.scratch.clamp_bounds.carried_passes;
+        let by_rule = by_rule.scratch.clamp_bounds.carried_passes;
         if strength < 0.1 {
             assert!(by_rule > 0, "{strength}: a gentle body never went on");
         } else if strength > 1.0 {
@@ -445,7 +445,7 @@ fn a_body_moving_as_a_whole_goes_on_from_its_bounds() {
         *v += Vec3::new(1.5, -4.0, 0.5);
     }
     let mut exact = by_rule.clone();
-    exact.clamp_bounds.disabled = true;
+    exact.scratch.clamp_bounds.disabled = true;
     for step in 0..8 {
         for body in [&mut by_rule, &mut exact] {
             body.begin_step();
@@ -457,7 +457,7 @@ fn a_body_moving_as_a_whole_goes_on_from_its_bounds() {
         assert_eq!(by_rule.positions, exact.positions, "step {step}");
     }
     // Eight passes: the first takes the bounds, the others may go on from them.
-    let carried = by_rule.clamp_bounds.carried_passes;
+    let carried = by_rule.scratch.clamp_bounds.carried_passes;
     assert!(carried >= 5, "{carried} of 7 passes went on");
     assert!(
         by_rule.counters().clamps_skipped > 0,
@@ -486,7 +486,7 @@ fn rings_known_within_their_tolerances_change_nothing() {
             *v += moving;
         }
         let mut exact = fast.clone();
-        exact.clamp_bounds.disabled = true;
+        exact.scratch.clamp_bounds.disabled = true;
         let (mut known, mut checked, mut kicked_rings) = (0, 0, 0);
         for step in 0..16 {
             for body in [&mut fast, &mut exact] {
@@ -536,7 +536,7 @@ fn rings_known_within_their_tolerances_change_nothing() {
 #[test]
 fn ring_checks_are_ready_only_once_computed_for_their_bounds() {
     let mut body = shaken_body(0.3);
-    body.clamp_bounds.always_carry = true;
+    body.scratch.clamp_bounds.always_carry = true;
     let first = (body.positions.clone(), body.velocities.clone());
     for step in 0..7 {
         body.begin_step();
@@ -544,16 +544,16 @@ fn ring_checks_are_ready_only_once_computed_for_their_bounds() {
             // Back where the bounds were taken: no particle has drifted, the body is quiet.
             (body.positions, body.velocities) = first.clone();
         }
-        let carried_before = body.clamp_bounds.carried_passes;
+        let carried_before = body.scratch.clamp_bounds.carried_passes;
         body.one_ring_pass(H, &mut []);
         body.per_tet_pass(H, &mut []);
         body.integrate_positions(H);
-        let carried = body.clamp_bounds.carried_passes > carried_before;
+        let carried = body.scratch.clamp_bounds.carried_passes > carried_before;
         assert!(
             step == 0 || carried,
             "step {step}: the bounds were taken again"
         );
-        let ready = body.clamp_bounds.ring_checks_ready;
+        let ready = body.scratch.clamp_bounds.ring_checks_ready;
         if step < 6 {
             assert_eq!(body.counters().ring_checks_skipped, 0, "step {step}");
             assert!(
@@ -624,7 +624,7 @@ fn impulses_near_a_far_drift_are_clamped_as_without_bounds() {
             fast.velocities[thrown] += throw;
         }
         let mut exact = fast.clone();
-        exact.clamp_bounds.disabled = true;
+        exact.scratch.clamp_bounds.disabled = true;
         for body in [&mut fast, &mut exact] {
             body.begin_step();
             body.one_ring_pass(H, &mut []);
