@@ -8,7 +8,7 @@ use glam::Vec3;
 
 use super::contacts::{ChunkFindings, in_particle_chunks};
 use super::geometry::signed_volume;
-use super::impulses::{ClampMotion, PassWorker};
+use super::impulses::{DriftTracking, PassWorker};
 use super::lanes::Point4;
 use super::material::{Elasticity, MaterialError, SoftBodyMaterial};
 use super::parallel::{BlockFlags, Parallel, Serial, SharedSlice};
@@ -137,14 +137,14 @@ pub(crate) struct StepScratch {
     /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
     /// passes. Kept zero between uses so that the passes never clear the whole array.
     pub(crate) per_particle: Vec<Vec3>,
-    /// Previewed positions `x + h v` during the volume passes, kept in step with every velocity
+    /// Predicted positions `x + h v` during the volume passes, kept in step with every velocity
     /// change there (`apply_velocity_change`), so the passes read one array, not two.
     /// Four numbers each, so that four are gathered into SIMD lanes with a load each.
-    pub(crate) previews: Vec<Point4>,
+    pub(crate) predicted: Vec<Point4>,
     /// Bounds that let most impulses skip the neighbour clamp (see `impulses/bounds.rs`).
-    pub(crate) clamp_bounds: super::impulses::ClampBounds,
+    pub(crate) clamp_bounds: super::impulses::SafeRadii,
     /// What the clamp bounds track per particle while a volume pass runs.
-    pub(crate) clamp_motion: ClampMotion,
+    pub(crate) clamp_motion: DriftTracking,
     /// One per block of the mesh: what each job of a volume pass owns.
     pub(crate) pass_workers: Vec<PassWorker>,
     /// One per block and phase: whether its job in the running pass is done.
@@ -157,7 +157,7 @@ pub(crate) struct StepScratch {
     pub(crate) substep_velocities: Vec<Vec3>,
     /// Per vertex, whether its ring was past its tolerance when its impulse last checked it:
     /// a guess of whether it will be again, which decides only how the check is computed,
-    /// never its result (see `PassView::ring_impulse`).
+    /// never its result (see `VolumePass::ring_impulse`).
     pub(crate) ring_corrected: Vec<bool>,
     /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
     pub(crate) shape_bundles: Vec<super::deviatoric::ShapeBundle>,
@@ -208,9 +208,9 @@ impl SoftBodyState {
             scratch: StepScratch {
                 spring_directions: vec![Vec3::ZERO; mesh.edges().len()],
                 per_particle: vec![Vec3::ZERO; n],
-                previews: vec![Point4::default(); n],
+                predicted: vec![Point4::default(); n],
                 clamp_bounds: Default::default(),
-                clamp_motion: ClampMotion::default(),
+                clamp_motion: DriftTracking::default(),
                 pass_workers: vec![PassWorker::for_mesh(&mesh); mesh.blocks().count()],
                 block_done: BlockFlags::new(2 * mesh.blocks().count()),
                 sphere_positions: Vec::new(),
@@ -475,19 +475,19 @@ impl SoftBodyState {
         self.catch_runaway();
     }
 
-    /// Previewed position of particle `i` (valid after `refresh_previews`, during the volume
+    /// Predicted position of particle `i` (valid after `refresh_predicted`, during the volume
     /// passes): where it ends the step with its current velocity.
     #[cfg(test)]
     #[inline]
-    pub(crate) fn preview(&self, i: u32) -> Vec3 {
-        self.scratch.previews[i as usize].vec3()
+    pub(crate) fn predicted_position(&self, i: u32) -> Vec3 {
+        self.scratch.predicted[i as usize].vec3()
     }
 
-    /// Sets every previewed position to `x + h v`.
-    pub(crate) fn refresh_previews(&mut self, h: f32) {
+    /// Sets every predicted position to `x + h v`.
+    pub(crate) fn refresh_predicted(&mut self, h: f32) {
         for ((xp, x), v) in self
             .scratch
-            .previews
+            .predicted
             .iter_mut()
             .zip(&self.positions)
             .zip(&self.velocities)

@@ -1,7 +1,7 @@
 //! Contacts of particles with static colliders (any parry shape) and with dynamic rigid
 //! spheres, at the velocity level.
 //!
-//! A contact is resolved on the previewed position `xp = x + h v`: when `xp` is inside a
+//! A contact is resolved on the predicted position `xp = x + h v`: when `xp` is inside a
 //! collider, the velocity gets the normal change that puts `xp` on the surface, and friction
 //! removes tangential velocity up to `mu` times that normal change (Coulomb). Against a sphere
 //! the change is shared by inverse mass, so the sphere is pushed back (two-way coupling) and
@@ -117,14 +117,14 @@ fn friction_change(vt: Vec3, limit: f32) -> Vec3 {
     }
 }
 
-/// Coulomb friction for a particle whose previewed position was pushed `depth` out of a static
+/// Coulomb friction for a particle whose predicted position was pushed `depth` out of a static
 /// collider along `normal`, with velocity `v` (the push included), at `x`: sticking at the
 /// position level, sliding at the velocity level. A particle already anchored (`anchor`
-/// finite: it touched the collider in the last contact pass) whose previewed tangential offset
+/// finite: it touched the collider in the last contact pass) whose predicted tangential offset
 /// from its anchor is at most `mu * depth` is put back on the anchor (static friction, the
 /// position-based form of Macklin et al.'s "Detailed Rigid Body Simulation with Extended
 /// Position Based Dynamics", 2020); otherwise its tangential velocity loses at most
-/// `mu * depth / h` and it is anchored where its preview ends. Returns the velocity and the
+/// `mu * depth / h` and it is anchored where its predicted position ends. Returns the velocity and the
 /// anchor.
 #[inline]
 fn static_friction(
@@ -202,7 +202,7 @@ pub(crate) fn in_particle_chunks(
 }
 
 impl SoftBodyState {
-    /// Pushes previewed positions out of static colliders. Returns the number of contacts.
+    /// Pushes predicted positions out of static colliders. Returns the number of contacts.
     pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
         self.resolve_static_contacts_on(h, colliders, &Serial)
     }
@@ -276,7 +276,7 @@ impl SoftBodyState {
         contacts
     }
 
-    /// Pushes previewed positions out of the (previewed) rigid spheres, pushing the spheres
+    /// Pushes predicted positions out of the (predicted) rigid spheres, pushing the spheres
     /// back. Returns the number of contacts.
     pub fn resolve_sphere_contacts(&mut self, h: f32, spheres: &mut [RigidSphereState]) -> u32 {
         let mut contacts = 0;
@@ -335,7 +335,7 @@ impl RigidSphereState {
         }
     }
 
-    /// Pushes the previewed sphere out of static colliders. Returns the number of contacts.
+    /// Pushes the predicted sphere out of static colliders. Returns the number of contacts.
     pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
         if self.inv_mass == 0.0 {
             return 0;

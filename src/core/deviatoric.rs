@@ -268,7 +268,7 @@ impl SoftBodyState {
     /// `gamma` XPBD's damping term. Needs `refresh_shape_bundles` this step.
     pub(crate) fn project_tet_shapes(&mut self, compliance: [f32; 2], hs2: f32, gamma: f32) {
         let x = &mut self.positions;
-        let start = &self.scratch.previews;
+        let start = &self.scratch.predicted;
         let gamma = f32x4::splat(gamma);
         let one_plus_gamma = f32x4::ONE + gamma;
         let half = f32x4::splat(0.5);
@@ -388,7 +388,7 @@ mod tests {
         body.masses = vec![1.0, 2.0, 3.0, 4.0];
         body.inv_masses = body.masses.iter().map(|m| 1.0 / m).collect();
         body.map_positions(&deform);
-        for (p, &x) in body.scratch.previews.iter_mut().zip(&body.positions) {
+        for (p, &x) in body.scratch.predicted.iter_mut().zip(&body.positions) {
             *p = super::super::lanes::Point4::new(x);
         }
         body.refresh_shape_bundles();

@@ -154,12 +154,12 @@ fn first_below_zero(c: &Cubic, hi: f64) -> Option<f64> {
     None
 }
 
-/// A reference pass's working state: its step, the previewed positions it moves along with the
+/// A reference pass's working state: its step, the predicted positions it moves along with the
 /// velocities, and the spheres' velocity changes, added to the spheres at its end.
 struct Pass<'a> {
     h: f32,
-    /// The previewed positions `x + h v`, moved along with every velocity change.
-    previews: Vec<Vec3>,
+    /// The predicted positions `x + h v`, moved along with every velocity change.
+    predicted: Vec<Vec3>,
     sphere_dv: &'a mut [Vec3],
 }
 
@@ -214,7 +214,7 @@ impl SoftBodyState {
         let mut sphere_dv = vec![Vec3::ZERO; spheres.len()];
         let mut pass = Pass {
             h,
-            previews: self
+            predicted: self
                 .positions
                 .iter()
                 .zip(&self.velocities)
@@ -241,7 +241,7 @@ impl SoftBodyState {
             .iter()
             .map(|c| c.map(|k| vertices[k as usize]))
             .collect();
-        let corners = |tet: [u32; 4]| tet.map(|i| pass.previews[i as usize]);
+        let corners = |tet: [u32; 4]| tet.map(|i| pass.predicted[i as usize]);
         let rest = |t: u32| mesh.rest_volumes()[t as usize];
         let errors: Vec<f32> = ring
             .iter()
@@ -311,7 +311,7 @@ impl SoftBodyState {
     fn reference_tet_impulse(&mut self, pass: &mut Pass, t: usize, settings: &ImpulseSettings) {
         let mesh = self.mesh.clone();
         let tet = mesh.tets()[t];
-        let p = tet.map(|i| pass.previews[i as usize]);
+        let p = tet.map(|i| pass.predicted[i as usize]);
         let rest = mesh.rest_volumes()[t];
         let error = volume(p) - rest;
         if error.abs() * settings.gamma <= settings.tolerance * rest {
@@ -359,7 +359,7 @@ impl SoftBodyState {
             if d.iter().all(|&d| d == Vec3::ZERO) {
                 continue;
             }
-            let p = tet.map(|i| pass.previews[i as usize]);
+            let p = tet.map(|i| pass.predicted[i as usize]);
             let rest = self.mesh.rest_volumes()[t as usize];
             let now = signed_volume(&p);
             let floor = clamp_floor(now, rest);
@@ -386,11 +386,11 @@ impl SoftBodyState {
         }
     }
 
-    /// Adds `dv` to particle `i`'s velocity and preview; a push into a sphere the particle
+    /// Adds `dv` to particle `i`'s velocity and predicted position; a push into a sphere the particle
     /// presses on moves the sphere along.
     fn reference_velocity_change(&mut self, pass: &mut Pass, i: usize, dv: Vec3) {
         self.velocities[i] += dv;
-        pass.previews[i] += pass.h * dv;
+        pass.predicted[i] += pass.h * dv;
         let k = self.contact_sphere[i];
         if let Some(sphere_dv) = pass.sphere_dv.get_mut(k as usize) {
             let n = self.contact_normals[i];
@@ -486,7 +486,7 @@ mod tests {
 
     #[test]
     fn the_fast_passes_give_the_reference_impulses() {
-        // A small cube with a jumble of velocities: previewed tets far from their rest volume,
+        // A small cube with a jumble of velocities: predicted tets far from their rest volume,
         // some below half of it, so that the clamp works hard.
         for (strength, exact) in [(1.0, false), (3.0, false), (3.0, true)] {
             let mut body = shaken_body(strength);

@@ -6,12 +6,12 @@
 //! 1. [`Stage::Forces`] (the paper's section 3, and the prediction): gravity, springs with
 //!    damping and, for the baseline, the per-tet volume forces change the velocities;
 //!    kinematic particles get the velocity that takes them to their target.
-//! 2. [`Stage::Contacts`]: velocities change so that the previewed positions `x + h v` lie
+//! 2. [`Stage::Contacts`]: velocities change so that the predicted positions `x + h v` lie
 //!    outside every collider and sphere, so that the volume passes see the contacts. A body
 //!    solved in substeps (a physical material's shape constraints, XPBD) is solved here,
 //!    meeting the contacts and running its volume passes in every substep (`xpbd.rs`).
 //! 3. [`Stage::OneRing`] (section 5) and 4. [`Stage::PerTet`] (section 4): the paper's volume
-//!    impulses on the previewed positions.
+//!    impulses on the predicted positions.
 //! 5. [`Stage::Plasticity`] (section 6): plastic springs.
 //! 6. [`Stage::Integrate`]: contacts again (undoing whatever the volume impulses pushed into a
 //!    collider, so that no particle ends a step inside one), then `x += h v`, then a body that
@@ -32,7 +32,7 @@ use super::parallel::{Parallel, Serial};
 pub enum Stage {
     /// Gravity, springs and damping, the baseline's volume forces, kinematic particles.
     Forces,
-    /// Contacts on the previewed positions; the shape of a body solved in substeps.
+    /// Contacts on the predicted positions; the shape of a body solved in substeps.
     Contacts,
     /// The one-ring volume impulses (the paper's section 5).
     OneRing,

@@ -45,9 +45,9 @@ impl SoftBodyState {
     /// constraints. For a physical material under the paper's impulses each substep is the
     /// paper's step at the substep's length, with the tets' shape constraints (`deviatoric.rs`;
     /// the edges for plastic springs) in place of its explicit springs: gravity, the shape
-    /// constraints, the contacts and damping give the velocities (the previewed positions
+    /// constraints, the contacts and damping give the velocities (the predicted positions
     /// `x + h_s v` are where the shape solve puts the particles), then the one-ring and per-tet
-    /// impulses restore the volume on those previews, then `x += h_s v`. The volume passes run
+    /// impulses restore the volume on those predicted positions, then `x += h_s v`. The volume passes run
     /// in every substep, not once a step: a body crushed within a step by a landing cannot be
     /// restored after it.
     ///
@@ -147,12 +147,12 @@ impl SoftBodyState {
             self.refresh_shape_bundles();
         }
         for k in 0..substeps {
-            // Predict; `previews` holds where each particle started the substep.
+            // Predict; `predicted` holds where each particle started the substep.
             for i in 0..self.positions.len() {
                 if self.inv_masses[i] > 0.0 {
                     self.velocities[i] += hs * gravity;
                 }
-                self.scratch.previews[i] = Point4::new(self.positions[i]);
+                self.scratch.predicted[i] = Point4::new(self.positions[i]);
                 self.positions[i] += hs * self.velocities[i];
             }
             match tet_compliance {
@@ -164,14 +164,14 @@ impl SoftBodyState {
             }
             // Velocities from the motion, then contacts on them from the substep's start.
             for i in 0..self.positions.len() {
-                let v = (self.positions[i] - self.scratch.previews[i].vec3()) / hs;
+                let v = (self.positions[i] - self.scratch.predicted[i].vec3()) / hs;
                 if v.is_finite() {
                     self.velocities[i] = v;
                 } else {
                     self.velocities[i] = Vec3::ZERO;
                     self.counters.non_finite_velocities += 1;
                 }
-                self.positions[i] = self.scratch.previews[i].vec3();
+                self.positions[i] = self.scratch.predicted[i].vec3();
             }
             // Each sphere where it is at this substep's start, then back exactly where it was.
             self.scratch.sphere_positions.clear();
@@ -207,7 +207,7 @@ impl SoftBodyState {
         contacts
     }
 
-    /// The paper's one-ring and per-tet impulses in a substep of `hs`, on the previews
+    /// The paper's one-ring and per-tet impulses in a substep of `hs`, on the predicted positions
     /// `x + hs v`, then `x += hs v`, with the impulses' energy kept in check: the positions
     /// take the impulses' whole change `dv`, the velocities `k dv` with the largest `k` in
     /// `[0, 1]` that adds no kinetic energy. An impulse that stops a compression (it takes
@@ -264,7 +264,7 @@ impl SoftBodyState {
     /// undamped one when it is zero.
     fn project_edges(&mut self, hs2: f32, gamma: f32) {
         let x = &mut self.positions;
-        let start = &self.scratch.previews;
+        let start = &self.scratch.predicted;
         let edges = self.mesh.edges();
         for &e in self.mesh.blocks().edges.items() {
             let e = e as usize;

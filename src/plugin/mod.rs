@@ -48,7 +48,7 @@ pub enum SoftBodySystems {
     /// [`Stage::Forces`]: gravity, the paper's springs with damping, baseline volume forces;
     /// the spheres' gravity.
     Forces,
-    /// [`Stage::Contacts`]: contacts on the previewed positions, so the volume passes see them;
+    /// [`Stage::Contacts`]: contacts on the predicted positions, so the volume passes see them;
     /// a shape solved in substeps (a physical material's, XPBD's whole step) is solved here,
     /// meeting the contacts in each substep.
     Contacts,

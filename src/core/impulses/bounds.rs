@@ -1,5 +1,5 @@
 //! The clamp bounds: what the start of a pass proves about how far each tet is from its
-//! floor, so that most impulses need not walk their neighbours (see [`ClampBounds`]).
+//! floor, so that most impulses need not walk their neighbours (see [`SafeRadii`]).
 
 use super::*;
 
@@ -10,7 +10,7 @@ use super::*;
 /// motion of its vertices; if each of them moves by at most `m` from where it was at the start,
 /// the volume moves by at most `drift_bound(m, G, L)`, with `G` the sum of the lengths of the
 /// tet's volume gradients and `L` its longest edge from its last vertex, both at the start. A
-/// particle's drift is the distance of its preview from where it was at the start of the pass.
+/// particle's drift is the distance of its predicted position from where it was at the start of the pass.
 /// Each tet's slack (its volume above its floor at the start) gives it a radius
 /// ([`safe_radius`]): while each of its particles stays within it of its start, the tet stays
 /// above its floor. A vertex's radius is the smallest of its one-ring's, a clamp region's the
@@ -35,7 +35,7 @@ use super::*;
 /// no more than its distance to that boundary, so that it cannot climb past it unseen, where
 /// the exact rule would no longer let it drop.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct ClampBounds {
+pub(crate) struct SafeRadii {
     /// Whether the bounds describe the current pass.
     pub(crate) active: bool,
     /// Never use the bounds (to compare against the exact walk in tests).
@@ -48,7 +48,7 @@ pub(crate) struct ClampBounds {
     /// for the per-tet pass after it.
     pub(super) keep_for_tets: bool,
     /// Whether the bounds were last taken by a one-ring pass, so that a later step's one-ring
-    /// pass may go on from them (see [`ClampBounds::still_hold`]), and whether they cover the
+    /// pass may go on from them (see [`SafeRadii::still_hold`]), and whether they cover the
     /// tets' regions too.
     pub(super) kept: bool,
     pub(super) kept_tet_regions: bool,
@@ -66,19 +66,19 @@ pub(crate) struct ClampBounds {
     /// The radius of each tet's region ([`ClampRegions::Tets`]).
     pub(super) tet_region_radius: Vec<f32>,
     /// Each tet's volume error, gradient sum and longest edge from its last vertex at the
-    /// start, for the rings' [`RingCheckBound`]s.
+    /// start, for the rings' [`RingErrorBound`]s.
     pub(super) tet_shape: Vec<TetShape>,
-    /// Each vertex's ring at the start (see [`RingCheckBound`]), computed by the first pass
+    /// Each vertex's ring at the start (see [`RingErrorBound`]), computed by the first pass
     /// that goes on from these bounds: a body that takes new bounds every pass (one that
     /// changes its shape) would pay for them without a pass to use them in.
-    pub(super) ring_check: Vec<RingCheckBound>,
+    pub(super) ring_check: Vec<RingErrorBound>,
     /// Whether `ring_check` describes these bounds.
     pub(super) ring_checks_ready: bool,
     /// Previews when the bounds were taken: a particle's drift is its distance from here.
     pub(super) start: Vec<Vec3>,
 }
 
-/// A tet at the start of the bounds: what [`RingCheckBound`] is made of.
+/// A tet at the start of the bounds: what [`RingErrorBound`] is made of.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct TetShape {
     pub(super) error: f32,
@@ -86,7 +86,7 @@ pub(super) struct TetShape {
     pub(super) reach: f32,
 }
 
-/// What a ring's tolerance check (see `PassView::ring_impulse`) found at the bounds' start, in
+/// What a ring's tolerance check (see `VolumePass::ring_impulse`) found at the bounds' start, in
 /// a form that bounds how far its drifts can have moved it since: the ring's volume error, the
 /// sums over its tets of their gradient sums and reaches (the terms of [`drift_bound`] summed),
 /// the largest relative error of one of its tets, its smallest rest volume, and its largest
@@ -97,7 +97,7 @@ pub(super) struct TetShape {
 /// only (see [`QUIET_DRIFT`]), where it saves about a fifth of a resting body's instructions
 /// (PERFORMANCE.md, "The fast path's skips").
 #[derive(Clone, Copy, Debug, Default)]
-pub(super) struct RingCheckBound {
+pub(super) struct RingErrorBound {
     pub(super) error: f32,
     pub(super) grad_sum: f32,
     pub(super) reach_sum: f32,
@@ -108,16 +108,16 @@ pub(super) struct RingCheckBound {
     pub(super) largest_reach: f32,
 }
 
-/// A ring is known to be within its tolerances when the bounds of [`RingCheckBound`] keep it
+/// A ring is known to be within its tolerances when the bounds of [`RingErrorBound`] keep it
 /// within this fraction of them: the rest covers the rounding of the `f32` volumes, the
 /// check's and the bounds' own (about a millionth of a tet's volume for a well-shaped tet,
 /// hundreds of times less than this margin of the ring tet tolerance, 5e-4 of the tet's
 /// volume), so the shortcut never skips a ring that the check would correct.
 pub(super) const RING_CHECK_MARGIN: f32 = 0.95;
 
-/// A one-ring pass uses the rings' [`RingCheckBound`]s only when at least [`QUIET_SHARE`] of
+/// A one-ring pass uses the rings' [`RingErrorBound`]s only when at least [`QUIET_SHARE`] of
 /// the body's particles have drifted less than this fraction of their vertex radius since the
-/// bounds' start (counted by `ClampBounds::near_start`). A tet's radius is about where it loses half its
+/// bounds' start (counted by `SafeRadii::near_start`). A tet's radius is about where it loses half its
 /// volume, so a ring's tolerance (0.3 %) allows a small fraction of it, less its error. In a
 /// body that is not this still, few rings are known and the bounds cost more than they save
 /// (most rings fail the test, and the bounds are made again for each short-lived set of clamp
@@ -127,7 +127,7 @@ pub const QUIET_DRIFT: f32 = 0.005;
 /// See [`QUIET_DRIFT`].
 pub const QUIET_SHARE: f32 = 0.75;
 
-impl RingCheckBound {
+impl RingErrorBound {
     /// Whether a ring with this bound, each of whose particles is within `drift` of its start,
     /// is within `tolerance` of its rest volume `rest` and each of its tets within
     /// `ring_tet_tolerance` of theirs. False for a broken (NaN) drift or bound.
@@ -150,9 +150,9 @@ impl RingCheckBound {
 
 /// A one-ring pass goes on from the bounds an earlier step's one-ring pass took when no particle
 /// (but a few strays, see [`CARRY_STRAYS`]) has drifted from where they were taken (moved along
-/// with the body, see `ClampBounds::follow_translation`) by more than this fraction of its
+/// with the body, see `SafeRadii::follow_translation`) by more than this fraction of its
 /// vertex radius: a body at rest, or nearly, whose particles come back to about the same
-/// previews step after step, or one that moves as a whole (falling, thrown, carried). The
+/// predicted positions step after step, or one that moves as a whole (falling, thrown, carried). The
 /// bounds hold however far the particles have gone (drifts are measured from their start, as
 /// for the per-tet pass), but the further they start from it, the fewer impulses they clear at
 /// once, so a body that changes its shape takes them afresh. 0.5 leaves half of each radius to
@@ -161,7 +161,7 @@ impl RingCheckBound {
 pub const CARRY_DRIFT: f32 = 0.5;
 
 /// A one-ring pass goes on from an earlier step's bounds with up to one particle in this many
-/// past [`CARRY_DRIFT`] (see [`ClampBounds::still_hold`]): in a body at rest under a load a few
+/// past [`CARRY_DRIFT`] (see [`SafeRadii::still_hold`]): in a body at rest under a load a few
 /// particles move more than the rest from step to step (over the soft cube's first 8 s, 59 of
 /// its 2 197 particles a step on average were past half their radius, and 119 of 899 one-ring
 /// passes went on). The strays are checked as any particle that drifted (their blocks' largest
@@ -169,22 +169,22 @@ pub const CARRY_DRIFT: f32 = 0.5;
 /// 200 particles still wait for every one.
 pub const CARRY_STRAYS: usize = 200;
 
-impl ClampBounds {
-    /// Whether the kept bounds still hold for a one-ring pass from `previews` (the tets'
+impl SafeRadii {
+    /// Whether the kept bounds still hold for a one-ring pass from `predicted` (the tets'
     /// regions too if `need_tet_regions`): see [`CARRY_DRIFT`] and [`CARRY_STRAYS`]. A vertex
-    /// without a positive radius, or a broken preview, asks for new bounds. Also how many
-    /// particles are quiet (see [`ClampBounds::near_start`]).
-    pub(super) fn still_hold(&self, need_tet_regions: bool, previews: &[Point4]) -> (bool, usize) {
+    /// without a positive radius, or a broken predicted position, asks for new bounds. Also how many
+    /// particles are quiet (see [`SafeRadii::near_start`]).
+    pub(super) fn still_hold(&self, need_tet_regions: bool, predicted: &[Point4]) -> (bool, usize) {
         if !self.kept || (need_tet_regions && !self.kept_tet_regions) {
             return (false, 0);
         }
-        let (near, quiet) = self.near_start(previews);
+        let (near, quiet) = self.near_start(predicted);
         #[cfg(test)]
         let near = near || self.always_carry;
         (near, quiet)
     }
 
-    /// Moves the bounds' start by the particles' mean drift from it (`previews` against
+    /// Moves the bounds' start by the particles' mean drift from it (`predicted` against
     /// `start`), so that drifts measure how the body changed its shape since the bounds were
     /// taken, not how far it went. A tet's volume does not change when all its particles move
     /// by the same vector, nor do its slack, gradients and edges, so every radius holds about
@@ -192,16 +192,16 @@ impl ClampBounds {
     /// the smallest drifts on the whole). A body falling, thrown or carried without changing
     /// its shape much then goes on from its bounds step after step instead of taking them
     /// afresh each time (see [`CARRY_DRIFT`]).
-    pub(super) fn follow_translation(&mut self, previews: &[Point4]) {
-        if previews.is_empty() || previews.len() != self.start.len() {
+    pub(super) fn follow_translation(&mut self, predicted: &[Point4]) {
+        if predicted.is_empty() || predicted.len() != self.start.len() {
             return;
         }
-        let sum = previews
+        let sum = predicted
             .iter()
             .zip(&self.start)
             .fold(Vec3::ZERO, |sum, (p, &start)| sum + (p.vec3() - start));
-        let shift = sum / previews.len() as f32;
-        // A broken preview makes the shift NaN, and the start with it: `near_start` then asks
+        let shift = sum / predicted.len() as f32;
+        // A broken predicted position makes the shift NaN, and the start with it: `near_start` then asks
         // for new bounds, which set the start again.
         for start in &mut self.start {
             *start += shift;
@@ -211,10 +211,10 @@ impl ClampBounds {
     /// Whether the particles are within [`CARRY_DRIFT`] of their vertex radius of the bounds'
     /// start, all but at most one in [`CARRY_STRAYS`]; and, if they are, how many are within
     /// [`QUIET_DRIFT`] of it (zero if not).
-    pub(super) fn near_start(&self, previews: &[Point4]) -> (bool, usize) {
-        let mut strays = previews.len() / CARRY_STRAYS;
+    pub(super) fn near_start(&self, predicted: &[Point4]) -> (bool, usize) {
+        let mut strays = predicted.len() / CARRY_STRAYS;
         let mut quiet = 0;
-        for ((p, &start), &radius) in previews.iter().zip(&self.start).zip(&self.vertex_radius) {
+        for ((p, &start), &radius) in predicted.iter().zip(&self.start).zip(&self.vertex_radius) {
             let limit = CARRY_DRIFT * radius;
             let drift_squared = (p.vec3() - start).length_squared();
             let usable = limit > 0.0 && !drift_squared.is_nan();
@@ -233,13 +233,13 @@ impl ClampBounds {
         (true, quiet)
     }
 
-    /// The arrays, for the jobs of a pass to fill and then read (see [`BoundsView`]).
+    /// The arrays, for the jobs of a pass to fill and then read (see [`PassRadii`]).
     ///
     /// # Safety
     /// The promise of [`SharedSlice::new`], for every array: the jobs that use the view split
     /// its elements between them or order their accesses.
-    pub(super) unsafe fn view(&mut self, regions: ClampRegions) -> BoundsView<'_> {
-        BoundsView {
+    pub(super) unsafe fn view(&mut self, regions: ClampRegions) -> PassRadii<'_> {
+        PassRadii {
             active: self.active,
             ring_checks: false,
             regions,
@@ -256,7 +256,7 @@ impl ClampBounds {
 
     /// Sizes the arrays for passes over `mesh` in `blocks` tasks (allocates only the first
     /// time).
-    pub(super) fn reserve(&mut self, mesh: &TetMesh, blocks: usize, motion: &mut ClampMotion) {
+    pub(super) fn reserve(&mut self, mesh: &TetMesh, blocks: usize, motion: &mut DriftTracking) {
         let (n, tets) = (mesh.vertex_count(), mesh.tet_count());
         for (array, len) in [
             (&mut self.tet_radius, tets),
@@ -270,19 +270,19 @@ impl ClampBounds {
             array.resize(len, 0.0);
         }
         self.tet_shape.resize(tets, TetShape::default());
-        self.ring_check.resize(n, RingCheckBound::default());
+        self.ring_check.resize(n, RingErrorBound::default());
         motion.walked.0.resize_with(tets, || AtomicU32::new(0));
         motion.far_nearby.0.resize_with(n, || AtomicU32::new(0));
         self.start.resize(n, Vec3::ZERO);
     }
 }
 
-/// [`ClampBounds`] during a pass: computed by the pass's first jobs, each writing its own
+/// [`SafeRadii`] during a pass: computed by the pass's first jobs, each writing its own
 /// range of tets, vertices or regions, then only read.
 #[derive(Clone, Copy)]
-pub(crate) struct BoundsView<'a> {
+pub(crate) struct PassRadii<'a> {
     pub(super) active: bool,
-    /// Whether the rings' [`RingCheckBound`]s hold in this pass (a one-ring pass going on from
+    /// Whether the rings' [`RingErrorBound`]s hold in this pass (a one-ring pass going on from
     /// earlier bounds).
     pub(super) ring_checks: bool,
     /// The regions of the pass's impulses.
@@ -292,20 +292,20 @@ pub(crate) struct BoundsView<'a> {
     pub(super) ring_region_radius: SharedSlice<'a, f32>,
     pub(super) tet_region_radius: SharedSlice<'a, f32>,
     pub(super) tet_shape: SharedSlice<'a, TetShape>,
-    pub(super) ring_check: SharedSlice<'a, RingCheckBound>,
+    pub(super) ring_check: SharedSlice<'a, RingErrorBound>,
     pub(super) start: SharedSlice<'a, Vec3>,
 }
 
 /// Tets, vertices or regions per job of the clamp bounds' computation.
 pub(super) const BOUNDS_CHUNK: usize = 512;
 
-impl BoundsView<'_> {
-    /// The radius of `tets` at `previews` from their slack, gradient sum and reach, four tets
+impl PassRadii<'_> {
+    /// The radius of `tets` at `predicted` from their slack, gradient sum and reach, four tets
     /// at a time (see `lanes`).
     pub(super) fn compute_tets(
         &self,
         mesh: &TetMesh,
-        previews: SharedSlice<Point4>,
+        predicted: SharedSlice<Point4>,
         tets: Range<usize>,
     ) {
         let (all, rest_volumes) = (mesh.tets(), mesh.rest_volumes());
@@ -313,7 +313,7 @@ impl BoundsView<'_> {
             let n = LANES.min(tets.end - start);
             // Lanes past the tail repeat the last tet (computed, not stored).
             let corner = |k: usize| {
-                previews.gather(std::array::from_fn(|l| {
+                predicted.gather(std::array::from_fn(|l| {
                     all[start + l.min(n - 1)][k] as usize
                 }))
             };
@@ -342,7 +342,7 @@ impl BoundsView<'_> {
             let at_eps = eps + f32x4::splat(CLAMP_ROUNDING) * v0;
             let below = (f32x4::splat(0.5 * CLAMP_SLACK) * v0).min(at_eps - volume);
             let slack = volume.cmp_ge(at_eps).blend(volume - eps, below);
-            // A broken preview: no bound is safe; every region holding it walks.
+            // A broken predicted position: no bound is safe; every region holding it walks.
             let radius = volume.is_finite().blend(
                 safe_radius(slack, grad, reach),
                 f32x4::splat(f32::NEG_INFINITY),
@@ -355,18 +355,18 @@ impl BoundsView<'_> {
     }
 
     /// The smallest tet radius of each vertex's one-ring, for `vertices`; and their start of
-    /// the pass (`previews`, zero `drift`). Needs every tet's radius.
+    /// the pass (`predicted`, zero `drift`). Needs every tet's radius.
     pub(super) fn compute_vertices(
         &self,
         mesh: &TetMesh,
-        previews: SharedSlice<Point4>,
+        predicted: SharedSlice<Point4>,
         drift: SharedSlice<f32>,
         vertices: Range<usize>,
     ) {
         for v in vertices {
             self.vertex_radius
                 .set(v, smallest(mesh.one_ring(v), self.tet_radius));
-            self.start.set(v, previews.get(v).vec3());
+            self.start.set(v, predicted.get(v).vec3());
             drift.set(v, 0.0);
         }
     }
@@ -390,13 +390,13 @@ impl BoundsView<'_> {
         }
     }
 
-    /// Each vertex's [`RingCheckBound`], for `vertices`. Needs every tet's shape.
+    /// Each vertex's [`RingErrorBound`], for `vertices`. Needs every tet's shape.
     #[inline(never)]
     pub(super) fn compute_ring_checks(&self, mesh: &TetMesh, vertices: Range<usize>) {
         let rest_volumes = mesh.rest_volumes();
         for v in vertices {
             let ring = mesh.one_ring(v);
-            let mut check = RingCheckBound {
+            let mut check = RingErrorBound {
                 tets: ring.len() as f32,
                 smallest_rest_volume: f32::INFINITY,
                 ..Default::default()
@@ -448,20 +448,20 @@ impl BoundsView<'_> {
     }
 
     /// For a pass that goes on from bounds taken earlier: the drift of the `vertices` of one
-    /// block from their previews, and the largest of them but the far ones (see
+    /// block from their predicted positions, and the largest of them but the far ones (see
     /// [`FAR_DRIFT`]), which are marked instead.
     pub(super) fn carry_drift(
         &self,
         mesh: &TetMesh,
-        previews: SharedSlice<Point4>,
+        predicted: SharedSlice<Point4>,
         drift: SharedSlice<f32>,
-        far: FarDrift,
+        far: FarDriftMarks,
         vertices: &[u32],
     ) -> f32 {
         let mut largest = 0.0f32;
         for &v in vertices {
             let v = v as usize;
-            let d = (previews.get(v).vec3() - self.start.get(v)).length();
+            let d = (predicted.get(v).vec3() - self.start.get(v)).length();
             drift.set(v, d);
             if self.is_far(v, d) {
                 far.mark(mesh, v);
@@ -491,15 +491,15 @@ pub(super) fn smallest(items: &[u32], values: SharedSlice<f32>) -> f32 {
 
 /// What the clamp bounds track while a pass runs, per particle.
 #[derive(Clone, Debug, Default)]
-pub(crate) struct ClampMotion {
-    /// Each particle's drift so far in the pass: the distance of its preview from
-    /// [`ClampBounds`]' start.
+pub(crate) struct DriftTracking {
+    /// Each particle's drift so far in the pass: the distance of its predicted position from
+    /// [`SafeRadii`]' start.
     pub(super) drift: Vec<f32>,
     /// During a clamp walk, the length of each particle's direction (zero for particles the
     /// impulse does not move), so the walk reads one number per vertex.
     pub(super) move_len: Vec<f32>,
     /// For each tet, the number of the last clamp walk that looked at it past its radius (see
-    /// [`PassView::clamp_unclear`]): one-rings of the walked vertices overlap, and a tet the
+    /// [`VolumePass::clamp_unclear`]): one-rings of the walked vertices overlap, and a tet the
     /// radius does not clear is looked at once per walk.
     pub(super) walked: PassMarks,
     /// The number of the last clamp walk (from 1), shared by the tasks of a pass.
@@ -515,7 +515,7 @@ pub(crate) struct ClampMotion {
 }
 
 /// A particle whose drift in a pass passes this fraction of its vertex radius (see
-/// [`ClampBounds`]) drifts far: instead of raising the largest drift of its block, which every
+/// [`SafeRadii`]) drifts far: instead of raising the largest drift of its block, which every
 /// impulse of the block and of the blocks after it is checked against, it marks the particles
 /// within one edge of it, and impulses that move a marked particle go to the per-vertex checks
 /// (which a particle past its own radius fails anyway). A few particles a pass drift that far
@@ -524,7 +524,7 @@ pub(crate) struct ClampMotion {
 pub(super) const FAR_DRIFT: f32 = 1.0;
 
 /// One number per particle or tet, the pass or walk that last marked it (see
-/// [`ClampMotion::far_nearby`] and [`ClampMotion::walked`]), written by the tasks of a pass at
+/// [`DriftTracking::far_nearby`] and [`DriftTracking::walked`]), written by the tasks of a pass at
 /// once (two tasks can mark the same one), hence atomic. A clone starts unmarked.
 #[derive(Debug, Default)]
 pub(crate) struct PassMarks(pub(super) Vec<AtomicU32>);
@@ -535,7 +535,7 @@ impl Clone for PassMarks {
     }
 }
 
-/// The number of the last clamp walk ([`ClampMotion::walks`]); a clone starts at zero, as its
+/// The number of the last clamp walk ([`DriftTracking::walks`]); a clone starts at zero, as its
 /// marks do.
 #[derive(Debug, Default)]
 pub(crate) struct WalkCount(pub(super) AtomicU32);
@@ -546,7 +546,7 @@ impl Clone for WalkCount {
     }
 }
 
-impl ClampMotion {
+impl DriftTracking {
     /// Starts the marks of a new pass with clamp bounds.
     pub(super) fn next_pass(&mut self) {
         if self.pass_number == u32::MAX {
@@ -567,7 +567,7 @@ impl ClampMotion {
     }
 }
 
-/// Which tets the running clamp walk has looked at ([`ClampMotion::walked`]). Tasks that run
+/// Which tets the running clamp walk has looked at ([`DriftTracking::walked`]). Tasks that run
 /// at the same time can walk the same tet (their clamp regions can touch), so the marks are
 /// atomic; each walk has its own number, so a walk only skips a tet it marked itself.
 #[derive(Clone, Copy)]
@@ -601,12 +601,12 @@ impl WalkMarks<'_> {
 /// at the same time are at least four edges apart (see [`Blocks`](super::tet_mesh::Blocks)),
 /// so a task reads only marks written by itself and by the tasks it waits for.
 #[derive(Clone, Copy)]
-pub(super) struct FarDrift<'a> {
+pub(super) struct FarDriftMarks<'a> {
     pub(super) marks: &'a [AtomicU32],
     pub(super) pass: u32,
 }
 
-impl FarDrift<'_> {
+impl FarDriftMarks<'_> {
     /// Marks the particles within one edge of particle `i`, which drifted far.
     pub(super) fn mark(&self, mesh: &TetMesh, i: usize) {
         for &v in mesh.ring_vertices(i) {
@@ -677,7 +677,7 @@ impl PassWorker {
 }
 
 /// `max(a, b)` as one instruction (`f32::max`'s NaN rules cost several in the hot gathers).
-/// A NaN `b` is ignored; the bounds guard against broken previews through the slack instead.
+/// A NaN `b` is ignored; the bounds guard against broken predicted positions through the slack instead.
 #[inline(always)]
 pub(super) fn larger(a: f32, b: f32) -> f32 {
     if b > a { b } else { a }

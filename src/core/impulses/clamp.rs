@@ -3,12 +3,12 @@
 
 use super::*;
 
-impl PassView<'_> {
-    /// Volume polynomial of `tet` when its particles move from their previewed positions along
+impl VolumePass<'_> {
+    /// Volume polynomial of `tet` when its particles move from their predicted positions along
     /// the directions held in `scratch` (zero for particles that do not move).
     #[inline]
     pub(super) fn moved_volume(&self, tet: [u32; 4]) -> Cubic {
-        let xp = tet.map(|i| self.preview(i));
+        let xp = tet.map(|i| self.predicted_position(i));
         let d = tet.map(|i| self.scratch.get(i as usize));
         volume_polynomial(&xp, &d)
     }
@@ -16,7 +16,7 @@ impl PassView<'_> {
     /// The neighbour clamp of an impulse that moves `vertices` by `step` times `directions` (in
     /// the same order; `largest_move` the longest of them), whose clamp region `region` is
     /// `whole_region`: the step shortened so that no tet of the region falls below its floor.
-    /// The [`ClampBounds`] answer first, with the largest drift seen in the pass, which costs
+    /// The [`SafeRadii`] answer first, with the largest drift seen in the pass, which costs
     /// nothing; if that is not enough, one vertex at a time; only the one-rings of the vertices
     /// that still are not clear are walked.
     #[allow(clippy::too_many_arguments)]
@@ -84,7 +84,7 @@ impl PassView<'_> {
                 .map(|&i| self.drift.get(i as usize) + step * self.move_len.get(i as usize))
                 .fold(0.0f32, larger);
             let v = v as usize;
-            // A broken (NaN) preview clears nothing.
+            // A broken (NaN) predicted position clears nothing.
             if reach >= b.vertex_radius.get(v) || reach.is_nan() {
                 unclear[count] = v as u32;
                 count += 1;
@@ -94,7 +94,7 @@ impl PassView<'_> {
     }
 
     /// The neighbour clamp over the one-rings of the `unclear` vertices of
-    /// [`PassView::find_unclear`], each tet once (the one-rings overlap; see [`WalkMarks`]).
+    /// [`VolumePass::find_unclear`], each tet once (the one-rings overlap; see [`WalkMarks`]).
     ///
     /// Each tet is first held against its radius with the reach of its four particles, taken
     /// from the ring's reaches (`reach`, one per ring vertex, computed once per vertex): the
@@ -146,7 +146,7 @@ impl PassView<'_> {
         let b = self.bounds;
         for &t in tets {
             let tet = mesh.tets()[t as usize];
-            // This tet alone, against its own start-of-pass bounds (see [`ClampBounds`]), with
+            // This tet alone, against its own start-of-pass bounds (see [`SafeRadii`]), with
             // how far each of its own four particles can get from its start: most tets of a
             // walk are cleared here (nine in ten under the cube's sphere), so this comes first.
             if b.active {
@@ -174,7 +174,7 @@ impl PassView<'_> {
             if max_move == 0.0 {
                 continue;
             }
-            let xp = tet.map(|i| self.preview(i));
+            let xp = tet.map(|i| self.predicted_position(i));
             let v0 = mesh.rest_volumes()[t as usize];
             let volume = signed_volume(&xp);
             let floor = clamp_floor(volume, v0);

@@ -1,6 +1,6 @@
 //! The paper's volume impulses (sections 4 and 5) and the neighbour clamp.
 //!
-//! Both passes work on previewed positions `xp = x + h v` and change velocities only, in
+//! Both passes work on predicted positions `xp = x + h v` and change velocities only, in
 //! Gauss-Seidel order: each impulse sees every impulse applied before it in the same pass.
 //!
 //! Directions. For a tet `t` with volume error `C_t = vol(xp) - V0_t`, the paper's impulse of
@@ -54,7 +54,7 @@ pub(crate) mod tests;
 mod tet;
 
 use bounds::*;
-pub(crate) use bounds::{ClampBounds, ClampMotion, PassWorker};
+pub(crate) use bounds::{DriftTracking, PassWorker, SafeRadii};
 use ring::RingWork;
 
 /// What one impulse did.
@@ -77,7 +77,7 @@ pub enum ImpulseOutcome {
 
 /// What a volume pass does with one task's row of items (vertices or tet bundles; see
 /// `SoftBodyState::run_blocks`), given the row's place in the flat list of items.
-type BlockImpulses<'a> = dyn Fn(&PassView, &mut PassWorker, &[u32], usize) + Sync + 'a;
+type BlockImpulses<'a> = dyn Fn(&VolumePass, &mut PassWorker, &[u32], usize) + Sync + 'a;
 
 /// Which clamp regions a pass uses.
 #[derive(Clone, Copy, PartialEq, Eq)]
@@ -165,7 +165,7 @@ impl SoftBodyState {
         if !settings.one_ring {
             return;
         }
-        self.refresh_previews(h);
+        self.refresh_predicted(h);
         let regions = settings.neighbour_clamp.then_some(ClampRegions::Rings);
         let mesh = self.mesh.clone();
         // The per-tet pass, if it runs, goes on from this pass's clamp bounds.
@@ -221,7 +221,7 @@ impl SoftBodyState {
         if !settings.per_tet || settings.gamma == 0.0 {
             return;
         }
-        self.refresh_previews(h);
+        self.refresh_predicted(h);
         let regions = settings.neighbour_clamp.then_some(ClampRegions::Tets);
         let mesh = self.mesh.clone();
         self.run_blocks(
@@ -286,19 +286,19 @@ impl SoftBodyState {
                 if self.scratch.clamp_bounds.kept {
                     self.scratch
                         .clamp_bounds
-                        .follow_translation(&self.scratch.previews);
+                        .follow_translation(&self.scratch.predicted);
                 }
                 let (carry, quiet) = self
                     .scratch
                     .clamp_bounds
-                    .still_hold(take_tet_regions, &self.scratch.previews);
-                quiet_body = quiet as f32 >= QUIET_SHARE * self.scratch.previews.len() as f32;
+                    .still_hold(take_tet_regions, &self.scratch.predicted);
+                quiet_body = quiet as f32 >= QUIET_SHARE * self.scratch.predicted.len() as f32;
                 carry
             }
             None => false,
         };
         // A one-ring pass going on from earlier bounds knows most rings of a body at rest to be
-        // within their tolerances (see `RingCheckBound`); the first such pass computes what it
+        // within their tolerances (see `RingErrorBound`); the first such pass computes what it
         // needs from the bounds' start, in the bounds' first two phases.
         let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
         let shapes = ring_checks && !self.scratch.clamp_bounds.ring_checks_ready;
@@ -329,7 +329,7 @@ impl SoftBodyState {
             };
             bounds.ring_checks = ring_checks;
             let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
-            let previews = unsafe { SharedSlice::new(&mut self.scratch.previews) };
+            let predicted = unsafe { SharedSlice::new(&mut self.scratch.predicted) };
             let scratch = unsafe { SharedSlice::new(&mut self.scratch.per_particle) };
             let drift = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) };
             let move_len = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) };
@@ -340,7 +340,7 @@ impl SoftBodyState {
             let block_drift =
                 unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.block_drift) };
             let ring_corrected = unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) };
-            let far = FarDrift {
+            let far = FarDriftMarks {
                 marks: &self.scratch.clamp_motion.far_nearby.0,
                 pass: self.scratch.clamp_motion.pass_number,
             };
@@ -396,12 +396,12 @@ impl SoftBodyState {
                     |items: usize| BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(items);
                 match phase {
                     0 if shapes => bounds.compute_tet_shapes(mesh, range(tet_count)),
-                    0 => bounds.compute_tets(mesh, previews, range(tet_count)),
+                    0 => bounds.compute_tets(mesh, predicted, range(tet_count)),
                     1 if shapes => bounds.compute_ring_checks(mesh, range(n)),
-                    1 => bounds.compute_vertices(mesh, previews, drift, range(n)),
+                    1 => bounds.compute_vertices(mesh, predicted, drift, range(n)),
                     2 if carry => {
                         let vertices = blocks.vertices.row(task);
-                        let largest = bounds.carry_drift(mesh, previews, drift, far, vertices);
+                        let largest = bounds.carry_drift(mesh, predicted, drift, far, vertices);
                         block_drift.set(task, largest);
                     }
                     2 => {
@@ -415,7 +415,7 @@ impl SoftBodyState {
                         }
                     }
                     _ => {
-                        let view = PassView {
+                        let view = VolumePass {
                             mesh,
                             h,
                             inv_masses,
@@ -425,7 +425,7 @@ impl SoftBodyState {
                             any_touching,
                             bounds,
                             velocities,
-                            previews,
+                            predicted,
                             scratch,
                             drift,
                             move_len,
@@ -501,7 +501,7 @@ impl SoftBodyState {
     }
 
     /// The one-ring impulse of vertex `p` alone, outside a pass (no clamp bounds). Needs
-    /// `refresh_previews` first.
+    /// `refresh_predicted` first.
     #[cfg(test)]
     pub(crate) fn ring_impulse(
         &mut self,
@@ -520,7 +520,7 @@ impl SoftBodyState {
     }
 
     /// The per-tet impulse of tet `t` alone, outside a pass (no clamp bounds). Needs
-    /// `refresh_previews` first.
+    /// `refresh_predicted` first.
     #[cfg(test)]
     pub(crate) fn tet_impulse(
         &mut self,
@@ -558,22 +558,22 @@ impl SoftBodyState {
     /// # Safety
     /// The view is used by one thread at a time.
     #[cfg(test)]
-    unsafe fn single_view(&mut self, h: f32) -> PassView<'_> {
+    unsafe fn single_view(&mut self, h: f32) -> VolumePass<'_> {
         self.scratch
             .clamp_motion
             .drift
-            .resize(self.scratch.previews.len(), 0.0);
+            .resize(self.scratch.predicted.len(), 0.0);
         self.scratch
             .clamp_motion
             .move_len
-            .resize(self.scratch.previews.len(), 0.0);
+            .resize(self.scratch.predicted.len(), 0.0);
         let tets = self.mesh.tet_count();
         self.scratch
             .clamp_motion
             .walked
             .0
             .resize_with(tets, || AtomicU32::new(0));
-        PassView {
+        VolumePass {
             mesh: &self.mesh,
             h,
             inv_masses: &self.inv_masses,
@@ -584,7 +584,7 @@ impl SoftBodyState {
             // SAFETY (for the view and every `SharedSlice`): this function's caller's promise.
             bounds: unsafe { self.scratch.clamp_bounds.view(ClampRegions::Rings) },
             velocities: unsafe { SharedSlice::new(&mut self.velocities) },
-            previews: unsafe { SharedSlice::new(&mut self.scratch.previews) },
+            predicted: unsafe { SharedSlice::new(&mut self.scratch.predicted) },
             scratch: unsafe { SharedSlice::new(&mut self.scratch.per_particle) },
             drift: unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) },
             move_len: unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) },
@@ -592,7 +592,7 @@ impl SoftBodyState {
                 walked: &self.scratch.clamp_motion.walked.0,
                 walks: &self.scratch.clamp_motion.walks.0,
             },
-            far: FarDrift {
+            far: FarDriftMarks {
                 marks: &self.scratch.clamp_motion.far_nearby.0,
                 pass: self.scratch.clamp_motion.pass_number,
             },
@@ -603,7 +603,7 @@ impl SoftBodyState {
 
 /// What the jobs of a pass share: the body's read-only data, and the arrays they write, each
 /// element by one job at a time (see [`super::parallel`]).
-pub(crate) struct PassView<'a> {
+pub(crate) struct VolumePass<'a> {
     mesh: &'a TetMesh,
     h: f32,
     inv_masses: &'a [f32],
@@ -611,25 +611,25 @@ pub(crate) struct PassView<'a> {
     contact_kept: &'a [f32],
     contact_sphere: &'a [u32],
     any_touching: bool,
-    bounds: BoundsView<'a>,
+    bounds: PassRadii<'a>,
     velocities: SharedSlice<'a, Vec3>,
-    /// Previewed positions `x + h v`, kept up to date with every velocity change.
-    previews: SharedSlice<'a, Point4>,
+    /// Predicted positions `x + h v`, kept up to date with every velocity change.
+    predicted: SharedSlice<'a, Point4>,
     /// Impulse directions by particle, for the clamp walk (zero outside a walk).
     scratch: SharedSlice<'a, Vec3>,
     drift: SharedSlice<'a, f32>,
     move_len: SharedSlice<'a, f32>,
     walks: WalkMarks<'a>,
-    far: FarDrift<'a>,
+    far: FarDriftMarks<'a>,
     /// Per vertex, whether its ring was past its tolerance when last checked (see
     /// [`SoftBodyState::ring_corrected`]); read and written by that ring's impulse only.
     ring_corrected: SharedSlice<'a, bool>,
 }
 
-impl PassView<'_> {
+impl VolumePass<'_> {
     #[inline(always)]
-    fn preview(&self, i: u32) -> Vec3 {
-        self.previews.get(i as usize).vec3()
+    fn predicted_position(&self, i: u32) -> Vec3 {
+        self.predicted.get(i as usize).vec3()
     }
 
     /// `d` with its push into what particle `i` touches reduced to the part the particle keeps:
@@ -653,10 +653,10 @@ impl PassView<'_> {
     #[inline(always)]
     fn apply_velocity_change(&self, worker: &mut PassWorker, i: usize, dv: Vec3) {
         self.velocities.set(i, self.velocities.get(i) + dv);
-        let preview = self.previews.get(i).vec3() + self.h * dv;
-        self.previews.set(i, Point4::new(preview));
+        let predicted_position = self.predicted.get(i).vec3() + self.h * dv;
+        self.predicted.set(i, Point4::new(predicted_position));
         if self.bounds.active {
-            let drift = (preview - self.bounds.start.get(i)).length();
+            let drift = (predicted_position - self.bounds.start.get(i)).length();
             if !self.bounds.is_far(i, drift) {
                 worker.max_moved = larger(worker.max_moved, drift);
             } else if !self.bounds.is_far(i, self.drift.get(i)) {

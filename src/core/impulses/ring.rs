@@ -8,7 +8,7 @@ use super::*;
 /// four to an entry.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct RingWork {
-    previews: Vec<Point4>,
+    predicted: Vec<Point4>,
     inv_masses: Vec<f32>,
     /// The summed directions `D_i`.
     directions: Vec<Vec3>,
@@ -20,7 +20,7 @@ impl RingWork {
     pub(crate) fn for_mesh(mesh: &TetMesh) -> RingWork {
         let n = mesh.max_ring_vertices();
         RingWork {
-            previews: vec![Point4::default(); n],
+            predicted: vec![Point4::default(); n],
             inv_masses: vec![0.0; n],
             directions: vec![Vec3::ZERO; n + 1],
             tets: vec![RingLanes::default(); mesh.max_one_ring().div_ceil(LANES)],
@@ -47,14 +47,14 @@ pub(super) fn gather_f32(values: &[f32], corners: &[[u16; 4]; LANES], k: usize) 
 }
 
 /// The edges `x_i - x_d` (i = a, b, c) of the ring's tets `4 group` to `4 group + 3` at the
-/// ring's gathered `previews`, and their rest volumes. Lanes past the ring hold a tet collapsed
+/// ring's gathered `predicted`, and their rest volumes. Lanes past the ring hold a tet collapsed
 /// onto the centre: zero edges, volume and error. Every tet's last corner is the centre (see
 /// `TetMesh::ring_corners`). A function always inlined rather than a closure: the compiler kept
 /// the closure out of line when the code around the ring impulse grew, at a few percent of the
 /// pass.
 #[inline(always)]
 pub(super) fn ring_group_edges(
-    previews: &[Point4],
+    predicted: &[Point4],
     ring_v0: &[f32],
     corners: &[[u16; 4]],
     group: usize,
@@ -68,8 +68,8 @@ pub(super) fn ring_group_edges(
             tet_corners[l] = corners[j];
         }
     }
-    let x = |k: usize| Vec3x4::gather_points(previews, tet_corners.map(|c| c[k] as usize));
-    let xd = Vec3x4::splat(previews[0].vec3());
+    let x = |k: usize| Vec3x4::gather_points(predicted, tet_corners.map(|c| c[k] as usize));
+    let xd = Vec3x4::splat(predicted[0].vec3());
     ([x(0) - xd, x(1) - xd, x(2) - xd], f32x4::new(v0))
 }
 
@@ -77,13 +77,13 @@ pub(super) fn ring_group_edges(
 /// the ring's check, and the group's rest volumes.
 #[inline(always)]
 pub(super) fn ring_group_lanes(
-    previews: &[Point4],
+    predicted: &[Point4],
     ring_v0: &[f32],
     corners: &[[u16; 4]],
     group: usize,
 ) -> (RingLanes, f32x4) {
     let sixth = f32x4::splat(SIXTH);
-    let (edges, v0) = ring_group_edges(previews, ring_v0, corners, group);
+    let (edges, v0) = ring_group_edges(predicted, ring_v0, corners, group);
     let gradients = [
         edges[1].cross(edges[2]).scale(sixth),
         edges[2].cross(edges[0]).scale(sixth),
@@ -99,7 +99,7 @@ pub(super) fn ring_group_lanes(
     (lanes, v0)
 }
 
-/// What a ring impulse knows of four tets of its ring at the current previews.
+/// What a ring impulse knows of four tets of its ring at the current predicted positions.
 #[derive(Clone, Copy, Debug, Default)]
 pub(super) struct RingLanes {
     /// Edge vectors `x_i - x_d`, i = a, b, c.
@@ -111,10 +111,10 @@ pub(super) struct RingLanes {
     error: f32x4,
 }
 
-impl PassView<'_> {
+impl VolumePass<'_> {
     /// Whether the ring of `p`, within its tolerances when last checked, is known to be within
     /// them still because its particles have not drifted far enough since the bounds' start to
-    /// leave them (see [`RingCheckBound`]): then its check, and its impulse, are skipped.
+    /// leave them (see [`RingErrorBound`]): then its check, and its impulse, are skipped.
     /// Kept out of line: it runs only in a quiet body's passes (see [`QUIET_DRIFT`]), and the
     /// pass's loop around `ring_impulse` stays as small as it was without it.
     #[inline(never)]
@@ -157,7 +157,7 @@ impl PassView<'_> {
 
     /// The one-ring impulse of vertex `p`: every particle of the ring moves by `s * D_i`, where
     /// `D_i` sums the directions of the ring's tets that contain it, and `s` is the smallest
-    /// positive root of `sum_t V_t(s) = sum_t V0_t`. Needs `refresh_previews` first.
+    /// positive root of `sum_t V_t(s) = sum_t V0_t`. Needs `refresh_predicted` first.
     ///
     /// The ring's particles are gathered into [`RingWork`] first and its tets are computed four
     /// at a time in SIMD lanes ([`Vec3x4`]), each lane with the scalar code's operations in the
@@ -176,7 +176,7 @@ impl PassView<'_> {
 
         let work = &mut worker.ring_work;
         for (k, &i) in vertices.iter().enumerate() {
-            work.previews[k] = self.previews.get(i as usize);
+            work.predicted[k] = self.predicted.get(i as usize);
         }
         let groups = ring.len().div_ceil(LANES);
         let ring_v0 = mesh.ring_rest_volumes(p);
@@ -194,14 +194,14 @@ impl PassView<'_> {
         let computed = self.ring_corrected.get(p);
         if computed {
             for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
-                let (full, v0) = ring_group_lanes(&work.previews, ring_v0, corners, group);
+                let (full, v0) = ring_group_lanes(&work.predicted, ring_v0, corners, group);
                 *lanes = full;
                 tet_outside_tolerance |= full.error.abs().cmp_gt(ring_tet_tolerance * v0);
                 ring_error += full.error;
             }
         } else {
             for group in 0..groups {
-                let (edges, v0) = ring_group_edges(&work.previews, ring_v0, corners, group);
+                let (edges, v0) = ring_group_edges(&work.predicted, ring_v0, corners, group);
                 let error = edges[0].dot(edges[1].cross(edges[2]).scale(sixth)) - v0;
                 tet_outside_tolerance |= error.abs().cmp_gt(ring_tet_tolerance * v0);
                 ring_error += error;
@@ -215,7 +215,7 @@ impl PassView<'_> {
         }
         if !computed {
             for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
-                *lanes = ring_group_lanes(&work.previews, ring_v0, corners, group).0;
+                *lanes = ring_group_lanes(&work.predicted, ring_v0, corners, group).0;
             }
         }
         for (k, &i) in vertices.iter().enumerate() {

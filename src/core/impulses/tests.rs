@@ -20,7 +20,7 @@ fn exact(gamma: f32, neighbour_clamp: bool) -> ImpulseSettings {
     }
 }
 
-/// A small cube with a deterministic jumble of velocities: strong enough that previewed
+/// A small cube with a deterministic jumble of velocities: strong enough that predicted
 /// tets are far from their rest volume, some below half of it.
 pub(crate) fn shaken_body(strength: f32) -> SoftBodyState {
     let mesh = Arc::new(box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO).unwrap());
@@ -36,7 +36,7 @@ pub(crate) fn shaken_body(strength: f32) -> SoftBodyState {
         };
         *v = Vec3::new(next(), next(), next()) * strength;
     }
-    body.refresh_previews(H);
+    body.refresh_predicted(H);
     body
 }
 
@@ -47,8 +47,8 @@ fn use_impulses(body: &mut SoftBodyState, settings: ImpulseSettings) {
     body.set_material(material).unwrap();
 }
 
-fn previewed_volume(body: &SoftBodyState, t: usize) -> f32 {
-    signed_volume(&body.mesh.tets()[t].map(|i| body.preview(i)))
+fn predicted_volume(body: &SoftBodyState, t: usize) -> f32 {
+    signed_volume(&body.mesh.tets()[t].map(|i| body.predicted_position(i)))
 }
 
 #[test]
@@ -101,7 +101,7 @@ fn ring_impulse_restores_the_ring_volume() {
             }
             let now: f32 = ring
                 .iter()
-                .map(|&t| previewed_volume(&body, t as usize))
+                .map(|&t| predicted_volume(&body, t as usize))
                 .sum();
             assert!(
                 (now - rest).abs() < 1e-4 * rest,
@@ -122,7 +122,7 @@ fn tet_impulse_with_gamma_one_restores_the_tet_volume() {
         {
             // gamma = 1 applies the whole root.
             let v0 = body.mesh.rest_volumes()[t];
-            let v = previewed_volume(&body, t);
+            let v = predicted_volume(&body, t);
             assert!((v - v0).abs() < 1e-3 * v0, "tet {t}: {v} vs {v0}");
         }
     }
@@ -135,7 +135,7 @@ fn clamp_keeps_touched_tets_at_or_above_half_their_rest_volume() {
     let mut clamped = 0;
     let mut below_at_start = 0;
     for p in 0..body.positions.len() {
-        let before: Vec<f32> = (0..tets).map(|t| previewed_volume(&body, t)).collect();
+        let before: Vec<f32> = (0..tets).map(|t| predicted_volume(&body, t)).collect();
         if let ImpulseOutcome::Applied { clamped: c, .. } =
             body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, true), &mut [])
         {
@@ -146,7 +146,7 @@ fn clamp_keeps_touched_tets_at_or_above_half_their_rest_volume() {
             // `eps`, or for a tet below it (or at it by rounding) its volume less the slack.
             let floor = clamp_floor(before_t, v0);
             below_at_start += (floor < CLAMP_FRACTION * v0) as usize;
-            let after = previewed_volume(&body, t);
+            let after = predicted_volume(&body, t);
             assert!(
                 after >= floor - 1e-4 * v0,
                 "ring {p}, tet {t}: {before_t} -> {after} (floor {floor})"
@@ -154,12 +154,12 @@ fn clamp_keeps_touched_tets_at_or_above_half_their_rest_volume() {
         }
     }
     for t in 0..tets {
-        let before: Vec<f32> = (0..tets).map(|u| previewed_volume(&body, u)).collect();
+        let before: Vec<f32> = (0..tets).map(|u| predicted_volume(&body, u)).collect();
         body.tet_impulse(&body.mesh.clone(), t, H, &exact(0.125, true), &mut []);
         for (u, &before_u) in before.iter().enumerate() {
             let v0 = body.mesh.rest_volumes()[u];
             let floor = clamp_floor(before_u, v0);
-            let after = previewed_volume(&body, u);
+            let after = predicted_volume(&body, u);
             assert!(
                 after >= floor - 1e-4 * v0,
                 "tet {t}, neighbour {u}: {before_u} -> {after} (floor {floor})"
@@ -179,13 +179,13 @@ fn passes_keep_every_tet_above_its_floor_with_the_fast_clamp() {
         body.begin_step();
         let above = |body: &SoftBodyState| -> Vec<bool> {
             (0..body.mesh.tet_count())
-                .map(|t| previewed_volume(body, t) >= CLAMP_FRACTION * body.mesh.rest_volumes()[t])
+                .map(|t| predicted_volume(body, t) >= CLAMP_FRACTION * body.mesh.rest_volumes()[t])
                 .collect()
         };
         let check = |body: &SoftBodyState, was_above: &[bool], pass: &str| {
             for (t, &was) in was_above.iter().enumerate() {
                 let v0 = body.mesh.rest_volumes()[t];
-                let v = previewed_volume(body, t);
+                let v = predicted_volume(body, t);
                 assert!(
                     !was || v >= CLAMP_FRACTION * v0 - 1e-4 * v0,
                     "strength {strength}, {pass} pass: tet {t} fell to {v} below V0/2 = {}",
@@ -435,7 +435,7 @@ fn one_ring_passes_going_on_from_earlier_steps_bounds_change_nothing() {
 }
 
 /// A body that moves as a whole, fast, while it shakes gently goes on from its earlier
-/// bounds (their start follows it, see `ClampBounds::follow_translation`), and clamps
+/// bounds (their start follows it, see `SafeRadii::follow_translation`), and clamps
 /// exactly as the walk without bounds does; without following, its drifts (the distance
 /// it travelled) ask for new bounds every pass.
 #[test]
@@ -468,7 +468,7 @@ fn a_body_moving_as_a_whole_goes_on_from_its_bounds() {
 /// A body at rest and moving as a whole, three particles of one corner kicked now and
 /// then, gently enough for the body to stay quiet (see `QUIET_DRIFT`) and the bounds to
 /// go on, hard enough to put the rings around them past their tolerances: most rings are
-/// known to be within their tolerances from the bounds (`RingCheckBound`), the kicked ones
+/// known to be within their tolerances from the bounds (`RingErrorBound`), the kicked ones
 /// are not, and the passes give exactly what they give checking every ring (the walk
 /// without bounds checks every ring). Taking every ring found within at its last check as
 /// known fails here (checked).
@@ -567,31 +567,31 @@ fn ring_checks_are_ready_only_once_computed_for_their_bounds() {
 }
 
 /// Bounds are carried with up to one particle in `CARRY_STRAYS` past `CARRY_DRIFT` of its
-/// radius, not with one more, and never with a broken preview or a radius at zero.
+/// radius, not with one more, and never with a broken predicted position or a radius at zero.
 #[test]
 fn bounds_are_carried_past_a_few_strays_only() {
     let n = 3 * CARRY_STRAYS + 17;
-    let bounds = ClampBounds {
+    let bounds = SafeRadii {
         start: vec![Vec3::ZERO; n],
         vertex_radius: vec![1.0; n],
         ..Default::default()
     };
     let within = Point4::new(Vec3::X * (0.99 * CARRY_DRIFT));
     let past = Point4::new(Vec3::Y * (1.01 * CARRY_DRIFT));
-    let mut previews = vec![within; n];
-    assert!(bounds.near_start(&previews).0);
-    for stray in previews.iter_mut().step_by(7).take(n / CARRY_STRAYS) {
+    let mut predicted = vec![within; n];
+    assert!(bounds.near_start(&predicted).0);
+    for stray in predicted.iter_mut().step_by(7).take(n / CARRY_STRAYS) {
         *stray = past;
     }
     assert!(
-        bounds.near_start(&previews).0,
+        bounds.near_start(&predicted).0,
         "3 strays of {n} are allowed"
     );
-    *previews.last_mut().unwrap() = past;
-    assert!(!bounds.near_start(&previews).0, "a fourth is not");
+    *predicted.last_mut().unwrap() = past;
+    assert!(!bounds.near_start(&predicted).0, "a fourth is not");
     let mut broken = vec![within; n];
     broken[5] = Point4::new(Vec3::NAN);
-    assert!(!bounds.near_start(&broken).0, "a NaN preview");
+    assert!(!bounds.near_start(&broken).0, "a NaN predicted position");
     let mut flat = bounds.clone();
     flat.vertex_radius[9] = 0.0;
     assert!(
@@ -647,7 +647,7 @@ fn kinematic_particles_are_not_moved() {
     let mut body = shaken_body(3.0);
     let v_before = body.velocities[0];
     body.set_kinematic(0, body.positions[0]).unwrap();
-    body.refresh_previews(H);
+    body.refresh_predicted(H);
     for p in 0..body.positions.len() {
         body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, true), &mut []);
     }
@@ -671,11 +671,11 @@ fn a_ring_within_tolerance_is_corrected_only_for_a_tet_past_the_ring_tet_toleran
             })
             .unwrap();
         body.velocities[p] = Vec3::new(1.0, 0.6, 0.3).normalize() * (by / H);
-        body.refresh_previews(H);
+        body.refresh_predicted(H);
         let (mut ring, mut rest, mut worst) = (0.0, 0.0, 0.0f32);
         for &t in body.mesh.one_ring(p) {
             let v0 = body.mesh.rest_volumes()[t as usize];
-            let v = previewed_volume(&body, t as usize);
+            let v = predicted_volume(&body, t as usize);
             (ring, rest) = (ring + v, rest + v0);
             worst = worst.max((v - v0).abs() / v0);
         }
@@ -712,7 +712,7 @@ fn tolerance_skips_small_errors_and_only_those() {
         (0..body.mesh.tet_count())
             .map(|t| {
                 let v0 = body.mesh.rest_volumes()[t];
-                (previewed_volume(body, t) - v0).abs() / v0
+                (predicted_volume(body, t) - v0).abs() / v0
             })
             .fold(0.0f32, f32::max)
     };

@@ -2,16 +2,16 @@
 
 use super::*;
 
-impl PassView<'_> {
+impl VolumePass<'_> {
     /// The per-tet impulses of a bundle of [`LANES`] tets that share no vertex (see
     /// [`Blocks::tet_bundles`]; [`NO_TET`] marks an empty lane), one after another: each tet's
     /// four particles move by `gamma * s * d_i`, `s` being the smallest positive root of
     /// `V_t(s) = V0_t`. `corners` and `rest_volumes` are the bundle's tets' (see
-    /// [`Blocks::bundle_corners`]). Needs `refresh_previews` first.
+    /// [`Blocks::bundle_corners`]). Needs `refresh_predicted` first.
     ///
     /// No impulse of the bundle moves a particle another of its tets reads, so the volumes,
     /// directions and cubics of all four are computed at once in SIMD lanes ([`Vec3x4`]) from
-    /// the previews as they are before the first; only the roots, the clamps (whose regions
+    /// the predicted positions as they are before the first; only the roots, the clamps (whose regions
     /// overlap) and the velocity changes go lane by lane, in order.
     ///
     /// [`Blocks::tet_bundles`]: super::tet_mesh::Blocks::tet_bundles
@@ -38,7 +38,7 @@ impl PassView<'_> {
         let v0 = f32x4::new(std::array::from_fn(|l| {
             rest_volumes.get(l).copied().unwrap_or(0.0)
         }));
-        let corner = |k: usize| self.previews.gather(tets.map(|t| t[k] as usize));
+        let corner = |k: usize| self.predicted.gather(tets.map(|t| t[k] as usize));
         let xd = corner(3);
         let (ea, eb, ec) = (corner(0) - xd, corner(1) - xd, corner(2) - xd);
         let sixth = f32x4::splat(SIXTH);
