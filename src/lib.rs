@@ -53,8 +53,8 @@ pub use loading::{
 #[allow(deprecated)]
 pub use plugin::SoftBodySet;
 pub use plugin::{
-    SoftBodyPlugin, SoftBodyPlugins, SoftBodyStageTimes, SoftBodyStepTime, SoftBodySystems,
-    SoftBodyThreads, SoftBodyTiming,
+    SoftBodyPlugin, SoftBodyStageTimes, SoftBodyStepTime, SoftBodySystems, SoftBodyThreads,
+    SoftBodyTiming,
 };
 #[cfg(feature = "render")]
 #[allow(deprecated)]
@@ -62,8 +62,44 @@ pub use surface::SoftBodySurfaceSet;
 #[cfg(feature = "render")]
 pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSystems, surface_mesh};
 
+/// The crate's plugins a game adds in one go: [`SoftBodyPlugin`] (the simulation), and with
+/// feature `render` [`SoftBodySurfacePlugin`](SoftBodySurfacePlugin) (render meshes that
+/// follow the bodies) and [`SoftBodyAssetPlugin`](SoftBodyAssetPlugin) (bodies from
+/// meshes and files; it needs Bevy's asset and mesh plugins, as in `DefaultPlugins`). Each part
+/// can be replaced or left out, as in any plugin group:
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::prelude::*;
+///
+/// // The simulation in `FixedPostUpdate`, at the game's fixed rate.
+/// let plugins = SoftBodyPlugins.set(SoftBodyPlugin::new(FixedPostUpdate));
+/// // A headless server has no meshes to draw or assets to build bodies from.
+/// #[cfg(feature = "render")]
+/// let plugins = plugins
+///     .disable::<SoftBodySurfacePlugin>()
+///     .disable::<SoftBodyAssetPlugin>();
+/// App::new().add_plugins((MinimalPlugins, plugins)).update();
+/// ```
+///
+/// The debug gizmos ([`SoftBodyDebugPlugin`](crate::debug::SoftBodyDebugPlugin)) and the
+/// inspector panel are not in the group: a game adds them while it needs them.
+pub struct SoftBodyPlugins;
+
+impl bevy::app::PluginGroup for SoftBodyPlugins {
+    fn build(self) -> bevy::app::PluginGroupBuilder {
+        let group = bevy::app::PluginGroupBuilder::start::<Self>().add(SoftBodyPlugin::default());
+        #[cfg(feature = "render")]
+        let group = group
+            .add(SoftBodySurfacePlugin)
+            .add(SoftBodyAssetPlugin::default());
+        group
+    }
+}
+
 /// Everything a game usually needs.
 pub mod prelude {
+    pub use crate::SoftBodyPlugins;
     pub use crate::components::{
         DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
         SoftBodyGravity, SoftBodyStats, StaticCollider,
@@ -76,7 +112,7 @@ pub mod prelude {
     pub use crate::loading::{
         SoftBodyAssetPlugin, SoftBodyFromAsset, SoftBodySource, TetMeshAsset,
     };
-    pub use crate::plugin::{SoftBodyPlugin, SoftBodyPlugins, SoftBodySystems, SoftBodyThreads};
+    pub use crate::plugin::{SoftBodyPlugin, SoftBodySystems, SoftBodyThreads};
     #[cfg(feature = "render")]
     pub use crate::surface::{SoftBodySurface, SoftBodySurfacePlugin};
 }

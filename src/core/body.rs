@@ -6,9 +6,9 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
-use super::contacts::{ChunkFindings, in_particle_chunks};
+use super::chunks::{ChunkFindings, in_particle_chunks};
 use super::geometry::signed_volume;
-use super::impulses::{DriftTracking, PassWorker};
+use super::impulses::{DriftTracking, PassWorker, SafeRadii, StepCounters};
 use super::lanes::Point4;
 use super::material::{Elasticity, MaterialError, SoftBodyMaterial};
 use super::parallel::{BlockFlags, Parallel, Serial, SharedSlice};
@@ -38,29 +38,6 @@ pub struct VolumeMetrics {
     pub mean_abs_tet_error_pct: f64,
     /// Tets with negative volume.
     pub inverted_tets: usize,
-}
-
-/// What the volume passes did in the last step (for statistics and tests).
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct StepCounters {
-    /// Rings whose impulse was applied.
-    pub rings_corrected: u32,
-    /// Rings whose cubic had no positive root: no impulse was applied to them.
-    pub rings_without_root: u32,
-    /// Rings whose impulse the neighbour clamp shortened.
-    pub rings_clamped: u32,
-    /// Tets whose per-tet cubic had no positive root.
-    pub tets_without_root: u32,
-    /// Tets whose per-tet impulse the neighbour clamp shortened.
-    pub tets_clamped: u32,
-    /// Impulses whose neighbour clamp was known to be moot from the pass's bounds, so its walk
-    /// over the neighbours was skipped.
-    pub clamps_skipped: u32,
-    /// Rings whose tolerance check was answered by the pass's bounds (within, nothing to do)
-    /// without computing their tets' volumes.
-    pub ring_checks_skipped: u32,
-    /// Particles whose new position would not have been finite: kept in place and stopped.
-    pub non_finite_velocities: u32,
 }
 
 /// One soft body: the particles of its tet mesh, the springs on its edges, its material and
@@ -142,7 +119,7 @@ pub(crate) struct StepScratch {
     /// Four numbers each, so that four are gathered into SIMD lanes with a load each.
     pub(crate) predicted: Vec<Point4>,
     /// Bounds that let most impulses skip the neighbour clamp (see `impulses/bounds.rs`).
-    pub(crate) clamp_bounds: super::impulses::SafeRadii,
+    pub(crate) clamp_bounds: SafeRadii,
     /// What the clamp bounds track per particle while a volume pass runs.
     pub(crate) clamp_motion: DriftTracking,
     /// One per block of the mesh: what each job of a volume pass owns.

@@ -18,104 +18,16 @@
 //! a resting body's base, each stopped by friction only while it pressed into the ground, made
 //! the body walk across the ground and never come to rest (PERFORMANCE.md, stop 30). Against a
 //! sphere, friction is Coulomb's on the relative velocity.
-//!
-//! The combined friction of two surfaces is the geometric mean of their coefficients.
 
 use glam::Vec3;
-use parry3d::bounding_volume::Aabb;
-use parry3d::math::Pose;
-use parry3d::query::contact;
-use parry3d::shape::{Ball, SharedShape};
 
 use super::body::SoftBodyState;
+use super::chunks::in_particle_chunks;
+use super::colliders::{ColliderInstance, RigidSphereState, combined_friction, friction_change};
 use super::parallel::{Parallel, Serial, SharedSlice};
-
-/// A static collider as the contact stage sees it.
-#[derive(Clone)]
-pub struct ColliderInstance {
-    /// Its shape.
-    pub shape: SharedShape,
-    /// Its pose in the world.
-    pub pose: Pose,
-    /// Its world bounds (from [`ColliderInstance::new`]), to skip far particles cheaply.
-    pub aabb: Aabb,
-    /// Its friction coefficient.
-    pub friction: f32,
-    /// For a half-space (the usual ground), its world outward normal `n` and offset `n . o`
-    /// of its plane: its bounds hold every particle, and a dot product answers what a
-    /// point projection through `dyn Shape` answers at several times the cost.
-    plane: Option<(Vec3, f32)>,
-}
-
-impl ColliderInstance {
-    /// A collider of `shape` at `pose`.
-    pub fn new(shape: SharedShape, pose: Pose, friction: f32) -> Self {
-        let plane = shape.as_halfspace().map(|half_space| {
-            let normal = pose.rotation * half_space.normal;
-            (normal, normal.dot(pose.translation))
-        });
-        ColliderInstance {
-            aabb: shape.compute_aabb(&pose),
-            shape,
-            pose,
-            friction,
-            plane,
-        }
-    }
-
-    /// How far `point` is inside this collider and the outward normal there, if it is inside.
-    #[inline]
-    pub(crate) fn penetration(&self, point: Vec3) -> Option<(f32, Vec3)> {
-        if let Some((normal, offset)) = self.plane {
-            let depth = offset - normal.dot(point);
-            return (depth > 0.0).then_some((depth, normal));
-        }
-        if !self.aabb.contains_local_point(point) {
-            return None;
-        }
-        let projection = self.shape.project_point(&self.pose, point, false);
-        if !projection.is_inside {
-            return None;
-        }
-        let delta = projection.point - point;
-        let depth = delta.length();
-        (depth > 0.0).then(|| (depth, delta / depth))
-    }
-}
-
-/// A dynamic rigid sphere as the solver sees it: it does not rotate.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct RigidSphereState {
-    /// Centre.
-    pub position: Vec3,
-    /// Velocity of the centre.
-    pub velocity: Vec3,
-    /// Radius.
-    pub radius: f32,
-    /// Inverse mass (zero: immovable).
-    pub inv_mass: f32,
-    /// Friction coefficient.
-    pub friction: f32,
-}
 
 /// Fastest speed, in m/s, at which a particle already inside a sphere is pushed out of it.
 pub const MAX_DEPENETRATION_SPEED: f32 = 1.0;
-
-#[inline]
-fn combined_friction(a: f32, b: f32) -> f32 {
-    (a * b).sqrt()
-}
-
-/// Removes tangential velocity `vt` up to `limit`.
-#[inline]
-fn friction_change(vt: Vec3, limit: f32) -> Vec3 {
-    let len = vt.length();
-    if len > 0.0 {
-        -vt * (limit.min(len) / len)
-    } else {
-        Vec3::ZERO
-    }
-}
 
 /// Coulomb friction for a particle whose predicted position was pushed `depth` out of a static
 /// collider along `normal`, with velocity `v` (the push included), at `x`: sticking at the
@@ -147,58 +59,6 @@ fn static_friction(
     let vt = v - normal * v.dot(normal);
     let v = v + friction_change(vt, mu * depth / h);
     (v, x + h * v)
-}
-
-/// Particles per job of [`SoftBodyState::resolve_static_contacts_on`] and
-/// [`SoftBodyState::integrate_positions_on`]: enough jobs in the soft cube's 2 197 particles
-/// (nine) for two threads to share them evenly.
-pub(crate) const CONTACT_CHUNK: usize = 256;
-
-/// What one job of [`SoftBodyState::resolve_static_contacts_on`] or
-/// [`SoftBodyState::integrate_positions_on`] found in its particles, added up in job order
-/// afterwards.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct ChunkFindings {
-    /// Particles that touch something for the first time this step, in index order (room for
-    /// the whole chunk is kept, so steps do not allocate).
-    pub(crate) new_touching: Vec<u32>,
-    /// Contacts found.
-    pub(crate) contacts: u32,
-    /// Particles whose new position would not have been finite.
-    pub(crate) non_finite: u32,
-}
-
-impl ChunkFindings {
-    /// One per job for `particles` particles.
-    pub(crate) fn for_particles(particles: usize) -> Vec<ChunkFindings> {
-        (0..particles.div_ceil(CONTACT_CHUNK))
-            .map(|_| ChunkFindings {
-                new_touching: Vec::with_capacity(CONTACT_CHUNK.min(particles)),
-                ..Default::default()
-            })
-            .collect()
-    }
-}
-
-/// Runs `job` on every chunk of [`CONTACT_CHUNK`] of `particles` particles, with that chunk's
-/// findings (one per chunk, from [`ChunkFindings::for_particles`]), on the threads of
-/// `parallel`.
-pub(crate) fn in_particle_chunks(
-    parallel: &dyn Parallel,
-    findings: &mut [ChunkFindings],
-    particles: usize,
-    job: impl Fn(&mut ChunkFindings, std::ops::Range<usize>) + Sync,
-) {
-    // SAFETY: each job takes only its own chunk's findings.
-    let findings = unsafe { SharedSlice::new(findings) };
-    parallel.run(particles.div_ceil(CONTACT_CHUNK), &|chunk| {
-        // SAFETY: each job has its own chunk's findings.
-        let found = unsafe { findings.get_mut(chunk) };
-        job(
-            found,
-            CONTACT_CHUNK * chunk..(CONTACT_CHUNK * (chunk + 1)).min(particles),
-        );
-    });
 }
 
 impl SoftBodyState {
@@ -327,54 +187,14 @@ impl SoftBodyState {
     }
 }
 
-impl RigidSphereState {
-    /// Gravity on the sphere (stage 1).
-    pub fn apply_forces(&mut self, h: f32, gravity: Vec3) {
-        if self.inv_mass > 0.0 {
-            self.velocity += h * gravity;
-        }
-    }
-
-    /// Pushes the predicted sphere out of static colliders. Returns the number of contacts.
-    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
-        if self.inv_mass == 0.0 {
-            return 0;
-        }
-        let ball = Ball::new(self.radius);
-        let mut contacts = 0;
-        for c in colliders {
-            let pose = Pose::from_translation(self.position + h * self.velocity);
-            // Unsupported shape pairs cannot occur for a ball against parry's shapes; if one
-            // does, the sphere passes through that collider rather than stopping the game.
-            let Ok(Some(hit)) = contact(&c.pose, &*c.shape, &pose, &ball, 0.0) else {
-                continue;
-            };
-            if hit.dist >= 0.0 {
-                continue;
-            }
-            let n = hit.normal1;
-            let dvn = -hit.dist / h;
-            let mut v = self.velocity + n * dvn;
-            let vt = v - n * v.dot(n);
-            v += friction_change(vt, combined_friction(self.friction, c.friction) * dvn);
-            self.velocity = v;
-            contacts += 1;
-        }
-        contacts
-    }
-
-    /// `x += h v`.
-    pub fn integrate_position(&mut self, h: f32) {
-        self.position += h * self.velocity;
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::core::material::SoftBodyMaterial;
     use crate::core::parallel::Threads;
     use glam::{Quat, UVec3};
+    use parry3d::math::Pose;
+    use parry3d::shape::{Ball, SharedShape};
 
     /// A rubber cube (1 MPa, 0.5 m) and a jelly cube resting on the ground at 60 Hz stay where
     /// they are: with velocity-only friction the rubber cube crept along, pushed by its own
@@ -424,7 +244,10 @@ mod tests {
         )
         .unwrap();
         let n = mesh.vertex_count();
-        assert!(n > 4 * CONTACT_CHUNK, "several chunks: {n} particles");
+        assert!(
+            n > 4 * crate::core::chunks::PARTICLE_CHUNK,
+            "several chunks: {n} particles"
+        );
         let colliders = [
             ColliderInstance::new(SharedShape::halfspace(Vec3::Y), Pose::IDENTITY, 0.5),
             ColliderInstance::new(

@@ -3,6 +3,8 @@
 
 pub mod blocks;
 pub mod body;
+pub(crate) mod chunks;
+pub mod colliders;
 pub mod contacts;
 pub mod deviatoric;
 pub mod embedding;
@@ -26,11 +28,11 @@ pub mod tetrahedralize;
 pub mod winding;
 pub mod xpbd;
 
-pub use body::{ParticleIndexError, SoftBodyState, StepCounters, VolumeMetrics};
-pub use contacts::{ColliderInstance, RigidSphereState};
+pub use body::{ParticleIndexError, SoftBodyState, VolumeMetrics};
+pub use colliders::{ColliderInstance, RigidSphereState};
 pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
-pub use impulses::ImpulseOutcome;
+pub use impulses::{ImpulseOutcome, StepCounters};
 pub use material::{
     ElasticSettings, Elasticity, ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial,
     VolumeMethod, XpbdSettings,

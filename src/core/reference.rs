@@ -21,7 +21,7 @@
 use glam::{DVec3, Vec3};
 
 use super::body::SoftBodyState;
-use super::contacts::RigidSphereState;
+use super::colliders::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume};
 use super::impulses::{RING_STEP_LIMIT, clamp_floor};
 use super::material::{ImpulseSettings, VolumeMethod};

@@ -23,7 +23,7 @@ use glam::Vec3;
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::body::SoftBodyState;
-use super::contacts::{ColliderInstance, RigidSphereState};
+use super::colliders::{ColliderInstance, RigidSphereState};
 
 /// When a body falls asleep.
 #[derive(Clone, Copy, Debug, PartialEq)]

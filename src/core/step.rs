@@ -24,7 +24,7 @@
 use glam::Vec3;
 
 use super::body::SoftBodyState;
-use super::contacts::{ColliderInstance, RigidSphereState};
+use super::colliders::{ColliderInstance, RigidSphereState};
 use super::parallel::{Parallel, Serial};
 
 /// A stage of a step. See the module's documentation for what each does and why in this order.

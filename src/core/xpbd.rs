@@ -29,7 +29,7 @@
 use glam::Vec3;
 
 use super::body::SoftBodyState;
-use super::contacts::{ColliderInstance, RigidSphereState};
+use super::colliders::{ColliderInstance, RigidSphereState};
 use super::geometry::{signed_volume, volume_gradients};
 use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};

@@ -4,7 +4,6 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Duration;
 
-use bevy::app::PluginGroupBuilder;
 use bevy::ecs::batching::BatchingStrategy;
 use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
 use bevy::platform::time::Instant;
@@ -75,41 +74,6 @@ impl From<Stage> for SoftBodySystems {
             Stage::Plasticity => SoftBodySystems::Plasticity,
             Stage::Integrate => SoftBodySystems::Integrate,
         }
-    }
-}
-
-/// The crate's plugins a game adds in one go: [`SoftBodyPlugin`] (the simulation), and with
-/// feature `render` [`SoftBodySurfacePlugin`](crate::SoftBodySurfacePlugin) (render meshes that
-/// follow the bodies) and [`SoftBodyAssetPlugin`](crate::SoftBodyAssetPlugin) (bodies from
-/// meshes and files; it needs Bevy's asset and mesh plugins, as in `DefaultPlugins`). Each part
-/// can be replaced or left out, as in any plugin group:
-///
-/// ```
-/// use bevy::prelude::*;
-/// use bevy_soft_body::prelude::*;
-///
-/// // The simulation in `FixedPostUpdate`, at the game's fixed rate.
-/// let plugins = SoftBodyPlugins.set(SoftBodyPlugin::new(FixedPostUpdate));
-/// // A headless server has no meshes to draw or assets to build bodies from.
-/// #[cfg(feature = "render")]
-/// let plugins = plugins
-///     .disable::<SoftBodySurfacePlugin>()
-///     .disable::<SoftBodyAssetPlugin>();
-/// App::new().add_plugins((MinimalPlugins, plugins)).update();
-/// ```
-///
-/// The debug gizmos ([`SoftBodyDebugPlugin`](crate::debug::SoftBodyDebugPlugin)) and the
-/// inspector panel are not in the group: a game adds them while it needs them.
-pub struct SoftBodyPlugins;
-
-impl PluginGroup for SoftBodyPlugins {
-    fn build(self) -> PluginGroupBuilder {
-        let group = PluginGroupBuilder::start::<Self>().add(SoftBodyPlugin::default());
-        #[cfg(feature = "render")]
-        let group = group
-            .add(crate::SoftBodySurfacePlugin)
-            .add(crate::SoftBodyAssetPlugin::default());
-        group
     }
 }
 

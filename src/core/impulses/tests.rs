@@ -3,6 +3,7 @@ use std::sync::Arc;
 use glam::{UVec3, Vec3};
 
 use super::*;
+use crate::core::body::SoftBodyState;
 use crate::core::geometry::volume_gradients;
 use crate::core::grid::box_grid;
 use crate::core::material::SoftBodyMaterial;

@@ -1,0 +1,479 @@
+//! Running the volume passes over a body: the one-ring pass (section 5) and the per-tet pass
+//! (section 4), serial or in the mesh's blocks on threads, each impulse as in
+//! [`VolumePass`]'s files (`ring.rs`, `tet.rs`, `clamp.rs`), and the pass's findings added up
+//! into the body.
+
+use super::*;
+use crate::core::body::SoftBodyState;
+
+impl SoftBodyState {
+    /// Stage 3: one impulse per vertex restoring the volume of its one-ring (section 5).
+    /// Does nothing for the baseline or when the one-ring switch is off.
+    /// `spheres` are the rigid spheres of the last contact pass, in the same order: particles
+    /// pressed against one move it along.
+    pub fn one_ring_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
+        self.one_ring_pass_on(h, spheres, &Serial);
+    }
+
+    /// [`SoftBodyState::one_ring_pass`] with the mesh's blocks run by `parallel`: the same
+    /// result bit for bit on any number of threads (see [`super::parallel`]).
+    pub fn one_ring_pass_on(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        // A body stepped in substeps has its impulses in every substep (`shape_pass`).
+        if !self.material.is_substepped() {
+            self.one_ring_impulses(h, spheres, parallel);
+        }
+    }
+
+    /// The one-ring pass over a step (or substep) of `h`.
+    pub(crate) fn one_ring_impulses(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        let VolumeMethod::Impulses(settings) = self.material.method else {
+            return;
+        };
+        if !settings.one_ring {
+            return;
+        }
+        self.refresh_predicted(h);
+        let regions = settings.neighbour_clamp.then_some(ClampRegions::Rings);
+        let mesh = self.mesh.clone();
+        // The per-tet pass, if it runs, goes on from this pass's clamp bounds.
+        self.scratch.clamp_bounds.keep_for_tets = settings.per_tet && settings.gamma != 0.0;
+        self.run_blocks(
+            h,
+            spheres,
+            parallel,
+            regions,
+            &mesh.blocks().vertices,
+            &|view, worker, centres, _| {
+                for &p in centres {
+                    let known = view.bounds.ring_checks
+                        && view.ring_known_within(worker, p as usize, &settings);
+                    if !known {
+                        view.ring_impulse(worker, p as usize, &settings);
+                    }
+                }
+            },
+        );
+    }
+
+    /// Stage 4: one impulse per tet towards its own rest volume, scaled by `gamma` (section 4,
+    /// end of section 5). Does nothing for the baseline or when the per-tet switch is off.
+    /// `spheres` as for [`SoftBodyState::one_ring_pass`].
+    pub fn per_tet_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
+        self.per_tet_pass_on(h, spheres, &Serial);
+    }
+
+    /// [`SoftBodyState::per_tet_pass`] with the mesh's blocks run by `parallel`, as
+    /// [`SoftBodyState::one_ring_pass_on`].
+    pub fn per_tet_pass_on(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        if !self.material.is_substepped() {
+            self.per_tet_impulses(h, spheres, parallel);
+        }
+    }
+
+    /// The per-tet pass over a step (or substep) of `h`.
+    pub(crate) fn per_tet_impulses(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        let VolumeMethod::Impulses(settings) = self.material.method else {
+            return;
+        };
+        if !settings.per_tet || settings.gamma == 0.0 {
+            return;
+        }
+        self.refresh_predicted(h);
+        let regions = settings.neighbour_clamp.then_some(ClampRegions::Tets);
+        let mesh = self.mesh.clone();
+        self.run_blocks(
+            h,
+            spheres,
+            parallel,
+            regions,
+            &mesh.blocks().tet_bundles,
+            &|view, worker, bundles, first| {
+                let blocks = mesh.blocks();
+                for (k, bundle) in bundles.chunks(LANES).enumerate() {
+                    let at = first + LANES * k..first + LANES * k + bundle.len();
+                    let corners = &blocks.bundle_corners[at.clone()];
+                    let rest = &blocks.bundle_rest_volumes[at];
+                    view.tet_bundle(worker, bundle, corners, rest, &settings);
+                }
+            },
+        );
+    }
+
+    /// Runs `impulse` on each task's row of `items` (the mesh's [`Blocks`]' vertices or tet
+    /// bundles; with the row's place in the flat list of items), which it works through in
+    /// order, with the result of running the tasks one after another (see
+    /// [`super::parallel`]): the threads of `parallel` take tasks in order as they come free,
+    /// each waiting for the earlier tasks it shares particles with. A thread only ever waits
+    /// for tasks a running thread has already taken, so any number of threads, one included,
+    /// finishes. Then adds up the tasks' counters and sphere velocity
+    /// changes in task order.
+    ///
+    /// [`Blocks`]: super::tet_mesh::Blocks
+    fn run_blocks(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+        clamp_regions: Option<ClampRegions>,
+        items: &Csr,
+        impulse: &BlockImpulses<'_>,
+    ) {
+        for worker in &mut self.scratch.pass_workers {
+            worker.counters = StepCounters::default();
+            worker.max_moved = 0.0;
+            worker.sphere_dv.clear();
+            worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        }
+        #[cfg(test)]
+        let clamp_regions = clamp_regions.filter(|_| !self.scratch.clamp_bounds.disabled);
+        let take_tet_regions =
+            clamp_regions == Some(ClampRegions::Tets) || self.scratch.clamp_bounds.keep_for_tets;
+        self.scratch.clamp_bounds.keep_for_tets = false;
+        // A per-tet pass after its step's one-ring pass goes on from the bounds that pass took
+        // (they hold as long as drifts are measured from where they were taken): it only
+        // measures each particle's drift again. Taking them costs about as much as the
+        // per-tet pass's impulses in the soft cube. A one-ring pass goes on from an earlier
+        // step's while the body has hardly moved since (see `CARRY_DRIFT`).
+        // Whether the body is quiet (see `QUIET_DRIFT`), known only when a one-ring pass checks
+        // whether it can go on from earlier bounds.
+        let mut quiet_body = false;
+        let carry = match clamp_regions {
+            Some(ClampRegions::Tets) => self.scratch.clamp_bounds.taken_this_step,
+            Some(ClampRegions::Rings) => {
+                if self.scratch.clamp_bounds.kept {
+                    self.scratch
+                        .clamp_bounds
+                        .follow_translation(&self.scratch.predicted);
+                }
+                let (carry, quiet) = self
+                    .scratch
+                    .clamp_bounds
+                    .still_hold(take_tet_regions, &self.scratch.predicted);
+                quiet_body = quiet as f32 >= QUIET_SHARE * self.scratch.predicted.len() as f32;
+                carry
+            }
+            None => false,
+        };
+        // A one-ring pass going on from earlier bounds knows most rings of a body at rest to be
+        // within their tolerances (see `RingErrorBound`); the first such pass computes what it
+        // needs from the bounds' start, in the bounds' first two phases.
+        let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
+        let shapes = ring_checks && !self.scratch.clamp_bounds.ring_checks_ready;
+        let blocks = self.mesh.blocks();
+        if clamp_regions.is_some() {
+            self.scratch.clamp_bounds.reserve(
+                &self.mesh,
+                blocks.count(),
+                &mut self.scratch.clamp_motion,
+            );
+            self.scratch.clamp_bounds.active = true;
+            self.scratch.clamp_motion.next_pass();
+        }
+        {
+            let mesh = &*self.mesh;
+            let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
+            let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
+            let any_touching = !self.touching.is_empty();
+            // SAFETY (for the view and every `SharedSlice` below): the pass's phases run one
+            // after another; in a chunked phase each chunk writes its own tets', vertices' or
+            // regions' entries; in a phase over the blocks a block runs after every block whose
+            // one-ring or tets it shares (`waits_for`), and writes only the particles, tets and
+            // block entries of its own items and their one-rings; each task has its own worker.
+            let mut bounds = unsafe {
+                self.scratch
+                    .clamp_bounds
+                    .view(clamp_regions.unwrap_or(ClampRegions::Rings))
+            };
+            bounds.ring_checks = ring_checks;
+            let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
+            let predicted = unsafe { SharedSlice::new(&mut self.scratch.predicted) };
+            let scratch = unsafe { SharedSlice::new(&mut self.scratch.per_particle) };
+            let drift = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) };
+            let move_len = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) };
+            let walks = WalkMarks {
+                walked: &self.scratch.clamp_motion.walked.0,
+                walks: &self.scratch.clamp_motion.walks.0,
+            };
+            let block_drift =
+                unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.block_drift) };
+            let ring_corrected = unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) };
+            let far = FarDriftMarks {
+                marks: &self.scratch.clamp_motion.far_nearby.0,
+                pass: self.scratch.clamp_motion.pass_number,
+            };
+            let workers = unsafe { SharedSlice::new(&mut self.scratch.pass_workers) };
+            let waits_for = &mesh.blocks().waits_for;
+            let count = items.len();
+            // The clamp bounds are computed first, in chunks: the tets', then the vertices'
+            // (which need all tets'), then the regions' (which need all vertices'): the rings'
+            // for a one-ring pass, the tets' for a per-tet pass or to keep; threads that join
+            // late (waking one takes longer than a chunk) find the work going. A pass going on
+            // from bounds taken earlier only measures the drifts, block by block.
+            let (n, tet_count) = (mesh.vertex_count(), mesh.tet_count());
+            let fresh = clamp_regions.is_some() && !carry;
+            let chunks = |items: usize| {
+                if fresh {
+                    items.div_ceil(BOUNDS_CHUNK)
+                } else {
+                    0
+                }
+            };
+            let ring_chunks = match clamp_regions {
+                Some(ClampRegions::Rings) => chunks(n),
+                _ => 0,
+            };
+            let tet_chunks = if take_tet_regions {
+                chunks(tet_count)
+            } else {
+                0
+            };
+            let chunk_phase = |tasks: usize| Phase { tasks, order: None };
+            let shape_chunks = |items: usize| {
+                if shapes {
+                    items.div_ceil(BOUNDS_CHUNK)
+                } else {
+                    0
+                }
+            };
+            let phases = [
+                chunk_phase(chunks(tet_count) + shape_chunks(tet_count)),
+                chunk_phase(chunks(n) + shape_chunks(n)),
+                chunk_phase(if carry {
+                    count
+                } else {
+                    ring_chunks + tet_chunks
+                }),
+                Phase {
+                    tasks: count,
+                    order: Some((waits_for, &self.scratch.block_done[..count])),
+                },
+            ];
+            run_phases(parallel, &phases, &|phase, task| {
+                let range =
+                    |items: usize| BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(items);
+                match phase {
+                    0 if shapes => bounds.compute_tet_shapes(mesh, range(tet_count)),
+                    0 => bounds.compute_tets(mesh, predicted, range(tet_count)),
+                    1 if shapes => bounds.compute_ring_checks(mesh, range(n)),
+                    1 => bounds.compute_vertices(mesh, predicted, drift, range(n)),
+                    2 if carry => {
+                        let vertices = blocks.vertices.row(task);
+                        let largest = bounds.carry_drift(mesh, predicted, drift, far, vertices);
+                        block_drift.set(task, largest);
+                    }
+                    2 => {
+                        if task < ring_chunks {
+                            bounds.compute_regions(mesh, ClampRegions::Rings, range(n));
+                        } else {
+                            let task = task - ring_chunks;
+                            let range =
+                                BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(tet_count);
+                            bounds.compute_regions(mesh, ClampRegions::Tets, range);
+                        }
+                    }
+                    _ => {
+                        let view = VolumePass {
+                            mesh,
+                            h,
+                            inv_masses,
+                            contact_normals,
+                            contact_kept,
+                            contact_sphere,
+                            any_touching,
+                            bounds,
+                            velocities,
+                            predicted,
+                            scratch,
+                            drift,
+                            move_len,
+                            walks,
+                            far,
+                            ring_corrected,
+                        };
+                        // The particles this task reads were last moved by the tasks it
+                        // waits for (done by now): their largest drift bounds those
+                        // particles' drift; going on from earlier bounds, so does the largest
+                        // drift at the start in this block and its neighbours (a block's
+                        // impulses read no further).
+                        let mut start_drift = 0.0f32;
+                        if carry {
+                            start_drift = block_drift.get(task);
+                            for &near in blocks.neighbours.row(task) {
+                                start_drift = larger(start_drift, block_drift.get(near as usize));
+                            }
+                        }
+                        for &earlier in waits_for.row(task) {
+                            // SAFETY: that task is done; nothing writes its worker now.
+                            let moved = unsafe { workers.get_mut(earlier as usize) }.max_moved;
+                            start_drift = larger(start_drift, moved);
+                        }
+                        // SAFETY: each task is run by one thread only.
+                        let worker = unsafe { workers.get_mut(task) };
+                        worker.max_moved = start_drift;
+                        impulse(&view, worker, items.row(task), items.range(task).start);
+                    }
+                }
+            });
+        }
+        self.scratch.clamp_bounds.active = false;
+        let bounds = &mut self.scratch.clamp_bounds;
+        match (clamp_regions, carry) {
+            (Some(ClampRegions::Rings), false) => {
+                bounds.taken_this_step = take_tet_regions;
+                (bounds.kept, bounds.kept_tet_regions) = (true, take_tet_regions);
+                bounds.ring_checks_ready = false;
+            }
+            (Some(ClampRegions::Rings), true) => {
+                bounds.taken_this_step = bounds.kept_tet_regions;
+                #[cfg(test)]
+                {
+                    bounds.carried_passes = bounds.carried_passes.saturating_add(1);
+                }
+                // Only a pass that computed the rings' checks makes them ready: a carried pass
+                // in a body not quiet enough computes none, and the next quiet one must.
+                bounds.ring_checks_ready |= shapes;
+            }
+            // Taken by a per-tet pass, without the rings' regions.
+            (Some(ClampRegions::Tets), false) => {
+                bounds.taken_this_step = true;
+                bounds.kept = false;
+                bounds.ring_checks_ready = false;
+            }
+            _ => {}
+        }
+        let c = &mut self.counters;
+        for worker in &self.scratch.pass_workers {
+            let w = &worker.counters;
+            c.rings_corrected += w.rings_corrected;
+            c.rings_without_root += w.rings_without_root;
+            c.rings_clamped += w.rings_clamped;
+            c.tets_without_root += w.tets_without_root;
+            c.tets_clamped += w.tets_clamped;
+            c.clamps_skipped += w.clamps_skipped;
+            c.ring_checks_skipped += w.ring_checks_skipped;
+            for (sphere, dv) in spheres.iter_mut().zip(&worker.sphere_dv) {
+                sphere.velocity += *dv;
+            }
+        }
+    }
+
+    /// The one-ring impulse of vertex `p` alone, outside a pass (no clamp bounds). Needs
+    /// `refresh_predicted` first.
+    #[cfg(test)]
+    pub(crate) fn ring_impulse(
+        &mut self,
+        _mesh: &TetMesh,
+        p: usize,
+        h: f32,
+        settings: &ImpulseSettings,
+        spheres: &mut [RigidSphereState],
+    ) -> ImpulseOutcome {
+        let mut worker = PassWorker::for_mesh(&self.mesh);
+        worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        // SAFETY: the view is used here, on this thread.
+        let outcome = unsafe { self.single_view(h) }.ring_impulse(&mut worker, p, settings);
+        self.finish_single(worker, spheres);
+        outcome
+    }
+
+    /// The per-tet impulse of tet `t` alone, outside a pass (no clamp bounds). Needs
+    /// `refresh_predicted` first.
+    #[cfg(test)]
+    pub(crate) fn tet_impulse(
+        &mut self,
+        _mesh: &TetMesh,
+        t: usize,
+        h: f32,
+        settings: &ImpulseSettings,
+        spheres: &mut [RigidSphereState],
+    ) -> ImpulseOutcome {
+        let mut worker = PassWorker::for_mesh(&self.mesh);
+        worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
+        let (corners, rest) = (self.mesh.tets()[t], self.mesh.rest_volumes()[t]);
+        // SAFETY: the view is used here, on this thread.
+        let [outcome, ..] = unsafe { self.single_view(h) }.tet_bundle(
+            &mut worker,
+            &[t as u32],
+            &[corners],
+            &[rest],
+            settings,
+        );
+        self.finish_single(worker, spheres);
+        outcome
+    }
+
+    #[cfg(test)]
+    fn finish_single(&mut self, worker: PassWorker, spheres: &mut [RigidSphereState]) {
+        self.counters = worker.counters;
+        for (sphere, dv) in spheres.iter_mut().zip(&worker.sphere_dv) {
+            sphere.velocity += *dv;
+        }
+    }
+
+    /// A view for one item's impulse on this thread, outside a pass.
+    ///
+    /// # Safety
+    /// The view is used by one thread at a time.
+    #[cfg(test)]
+    unsafe fn single_view(&mut self, h: f32) -> VolumePass<'_> {
+        self.scratch
+            .clamp_motion
+            .drift
+            .resize(self.scratch.predicted.len(), 0.0);
+        self.scratch
+            .clamp_motion
+            .move_len
+            .resize(self.scratch.predicted.len(), 0.0);
+        let tets = self.mesh.tet_count();
+        self.scratch
+            .clamp_motion
+            .walked
+            .0
+            .resize_with(tets, || AtomicU32::new(0));
+        VolumePass {
+            mesh: &self.mesh,
+            h,
+            inv_masses: &self.inv_masses,
+            contact_normals: &self.contact_normals,
+            contact_kept: &self.contact_kept,
+            contact_sphere: &self.contact_sphere,
+            any_touching: !self.touching.is_empty(),
+            // SAFETY (for the view and every `SharedSlice`): this function's caller's promise.
+            bounds: unsafe { self.scratch.clamp_bounds.view(ClampRegions::Rings) },
+            velocities: unsafe { SharedSlice::new(&mut self.velocities) },
+            predicted: unsafe { SharedSlice::new(&mut self.scratch.predicted) },
+            scratch: unsafe { SharedSlice::new(&mut self.scratch.per_particle) },
+            drift: unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) },
+            move_len: unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) },
+            walks: WalkMarks {
+                walked: &self.scratch.clamp_motion.walked.0,
+                walks: &self.scratch.clamp_motion.walks.0,
+            },
+            far: FarDriftMarks {
+                marks: &self.scratch.clamp_motion.far_nearby.0,
+                pass: self.scratch.clamp_motion.pass_number,
+            },
+            ring_corrected: unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) },
+        }
+    }
+}
