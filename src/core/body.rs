@@ -7,11 +7,15 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use super::chunks::{ChunkFindings, in_particle_chunks};
+use super::colliders::{ColliderInstance, RigidSphereState};
+use super::deviatoric::{ShapeBundle, shape_bundles};
 use super::geometry::signed_volume;
 use super::impulses::{DriftTracking, PassWorker, SafeRadii, StepCounters};
 use super::lanes::Point4;
 use super::material::{Elasticity, MaterialError, SoftBodyMaterial};
 use super::parallel::{BlockFlags, Parallel, Serial, SharedSlice};
+use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
+use super::sleep::{Sleep, SleepSettings};
 use super::tet_mesh::TetMesh;
 
 /// A particle index that does not exist in the body's mesh.
@@ -86,9 +90,9 @@ pub struct SoftBodyState {
     /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
     pub(crate) gravity: Vec3,
     /// When the body counts as running away (see `runaway.rs`).
-    pub(crate) runaway_limits: super::runaway::RunawayLimits,
+    pub(crate) runaway_limits: RunawayLimits,
     /// The runaway caught in this step, if any.
-    pub(crate) runaway: Option<super::runaway::Runaway>,
+    pub(crate) runaway: Option<Runaway>,
     /// The centre of mass at the end of the last step that was not a runaway.
     pub(crate) sane_centre: Option<Vec3>,
     /// The diagonal of the rest shape's bounding box.
@@ -96,7 +100,7 @@ pub struct SoftBodyState {
     /// The shortest rest edge, for the substeps a fast body needs.
     pub(crate) shortest_edge: f32,
     /// Whether the body sleeps, and for how long it has been quiet (see `sleep.rs`).
-    pub(crate) sleep: super::sleep::Sleep,
+    pub(crate) sleep: Sleep,
     /// A step's working memory and the caches that only save it work (see [`StepScratch`]).
     pub(crate) scratch: StepScratch,
 }
@@ -137,7 +141,7 @@ pub(crate) struct StepScratch {
     /// never its result (see `VolumePass::ring_impulse`).
     pub(crate) ring_corrected: Vec<bool>,
     /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
-    pub(crate) shape_bundles: Vec<super::deviatoric::ShapeBundle>,
+    pub(crate) shape_bundles: Vec<ShapeBundle>,
 }
 
 impl SoftBodyState {
@@ -173,7 +177,7 @@ impl SoftBodyState {
             touching: Vec::with_capacity(n),
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
-            sleep: super::sleep::Sleep::new(Some(Default::default()), n),
+            sleep: Sleep::new(Some(Default::default()), n),
             runaway_limits: Default::default(),
             runaway: None,
             sane_centre: None,
@@ -194,7 +198,7 @@ impl SoftBodyState {
                 chunk_findings: ChunkFindings::for_particles(n),
                 ring_corrected: vec![false; n],
                 substep_velocities: vec![Vec3::ZERO; n],
-                shape_bundles: super::deviatoric::shape_bundles(&mesh),
+                shape_bundles: shape_bundles(&mesh),
             },
             mesh,
         };
@@ -518,6 +522,115 @@ impl SoftBodyState {
             .zip(&self.masses)
             .map(|(&v, &m)| v * m)
             .sum()
+    }
+
+    /// When the body falls asleep; `None` if it never does.
+    pub fn sleep_settings(&self) -> Option<SleepSettings> {
+        self.sleep.settings
+    }
+
+    /// Sets when the body falls asleep (`None`: never; it wakes if asleep). Bodies stepped in
+    /// substeps sleep by default; the paper's explicit springs never do.
+    pub fn set_sleep_settings(&mut self, settings: Option<SleepSettings>) {
+        self.sleep.settings = settings;
+        self.sleep.wake();
+    }
+
+    /// Whether the body is asleep: at rest, not stepped until something disturbs it.
+    pub fn is_sleeping(&self) -> bool {
+        self.sleep.asleep
+    }
+
+    /// Wakes the body if it sleeps, and restarts the time it must be quiet to fall asleep.
+    pub fn wake_up(&mut self) {
+        self.sleep.wake();
+    }
+
+    /// At the start of a substepped step, for a sleeping body: wakes it if the step disturbs
+    /// it (see [`Sleep::stays_asleep`]). Returns whether it still sleeps (the step then leaves
+    /// it alone: kinematic particles stay where they are, nothing moves).
+    pub(crate) fn stays_asleep(
+        &mut self,
+        h: f32,
+        spheres: &[RigidSphereState],
+        colliders: &[ColliderInstance],
+    ) -> bool {
+        if !self.sleep.asleep {
+            return false;
+        }
+        let reach = self.sleep.speed_or_zero() * h;
+        let moved_kinematic = self
+            .kinematic_targets()
+            .any(|(i, target)| (target - self.positions[i]).length() > reach);
+        let still = self
+            .sleep
+            .stays_asleep(h, moved_kinematic, self.gravity, spheres, colliders);
+        if still {
+            self.velocities.fill(Vec3::ZERO);
+        }
+        still
+    }
+
+    /// At the end of a substepped step of `h`: counts the body's quiet time and puts it to
+    /// sleep once it is long enough (see [`Sleep::update`]).
+    pub(crate) fn update_sleep(
+        &mut self,
+        h: f32,
+        spheres: &[RigidSphereState],
+        colliders: &[ColliderInstance],
+    ) {
+        let fell_asleep = self.sleep.update(
+            h,
+            &self.positions,
+            self.rest_extent,
+            self.gravity,
+            spheres,
+            colliders,
+        );
+        if fell_asleep {
+            self.velocities.fill(Vec3::ZERO);
+        }
+    }
+
+    /// The limits past which a body is caught running away.
+    pub fn runaway_limits(&self) -> RunawayLimits {
+        self.runaway_limits
+    }
+
+    /// Sets the limits past which a body is caught running away.
+    pub fn set_runaway_limits(&mut self, limits: RunawayLimits) {
+        self.runaway_limits = limits;
+    }
+
+    /// The runaway caught in the last step, if any.
+    pub fn runaway(&self) -> Option<Runaway> {
+        self.runaway
+    }
+
+    /// Checks the body after its positions moved (the end of a step): past the limits, it is
+    /// put back in its rest shape (translated so that its centre of mass is at the last sane
+    /// one, at rest), and the step records a [`Runaway`]; otherwise this centre becomes the
+    /// last sane one.
+    pub(crate) fn catch_runaway(&mut self) {
+        let motion = BodyMotion::measure(&self.positions, &self.velocities, &self.masses);
+        if self.runaway_limits.allow(&motion, self.rest_extent) {
+            self.sane_centre = Some(motion.centre);
+            return;
+        }
+        let reset_to = put_back_at_rest(
+            self.mesh.positions(),
+            &self.masses,
+            self.sane_centre,
+            &mut self.positions,
+        );
+        self.previous_positions.copy_from_slice(&self.positions);
+        self.velocities.fill(Vec3::ZERO);
+        self.runaway = Some(Runaway {
+            speed: motion.speed,
+            extent: motion.extent,
+            rest_extent: self.rest_extent,
+            reset_to,
+        });
     }
 }
 

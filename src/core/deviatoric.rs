@@ -37,8 +37,7 @@ use std::f32::consts::FRAC_1_SQRT_2;
 use glam::{Mat3, Vec3};
 use wide::f32x4;
 
-use super::body::SoftBodyState;
-use super::lanes::{LANES, Vec3x4};
+use super::lanes::{LANES, Point4, Vec3x4};
 #[cfg(doc)]
 use super::material::ElasticSettings;
 use super::tet_mesh::TetMesh;
@@ -170,7 +169,7 @@ pub(crate) struct ShapeBundle {
 }
 
 /// The mesh's tets in bundles (see [`ShapeBundle`]), their inverse masses and Gram matrices
-/// left for [`SoftBodyState::refresh_shape_bundles`].
+/// left for [`refresh_shape_bundles`].
 pub(crate) fn shape_bundles(mesh: &TetMesh) -> Vec<ShapeBundle> {
     let x = mesh.positions();
     let tets = mesh.tets();
@@ -237,95 +236,98 @@ pub(crate) fn shape_bundles(mesh: &TetMesh) -> Vec<ShapeBundle> {
         .collect()
 }
 
-impl SoftBodyState {
-    /// Each bundle's inverse masses and Gram matrices for this step's inverse masses
-    /// (kinematic particles have none).
-    pub(crate) fn refresh_shape_bundles(&mut self) {
-        let w = &self.inv_masses;
-        for b in &mut self.scratch.shape_bundles {
-            b.inv_masses = std::array::from_fn(|k| {
-                f32x4::new(std::array::from_fn(|l| {
-                    if b.filled[l] { w[b.corners[k][l]] } else { 0.0 }
-                }))
-            });
-            let mut s = [f32x4::ZERO; 6];
-            for (g, &w) in b.gradients.iter().zip(&b.inv_masses) {
-                let wg = g.scale(w);
-                s[0] += wg.x * g.x;
-                s[1] += wg.y * g.y;
-                s[2] += wg.z * g.z;
-                s[3] += wg.x * g.y;
-                s[4] += wg.x * g.z;
-                s[5] += wg.y * g.z;
-            }
-            b.gram = s;
+/// Each bundle's inverse masses and Gram matrices for this step's inverse masses `w` by
+/// particle (kinematic particles have none).
+pub(crate) fn refresh_shape_bundles(bundles: &mut [ShapeBundle], w: &[f32]) {
+    for b in bundles {
+        b.inv_masses = std::array::from_fn(|k| {
+            f32x4::new(std::array::from_fn(|l| {
+                if b.filled[l] { w[b.corners[k][l]] } else { 0.0 }
+            }))
+        });
+        let mut s = [f32x4::ZERO; 6];
+        for (g, &w) in b.gradients.iter().zip(&b.inv_masses) {
+            let wg = g.scale(w);
+            s[0] += wg.x * g.x;
+            s[1] += wg.y * g.y;
+            s[2] += wg.z * g.z;
+            s[3] += wg.x * g.y;
+            s[4] += wg.x * g.z;
+            s[5] += wg.y * g.z;
         }
+        b.gram = s;
     }
+}
 
-    /// One pass over the tets' shape constraints (see the module's doc), bundle by bundle: per
-    /// tet the five deviatoric ones in turn, then the hydrostatic one. `compliance` is theirs
-    /// per unit volume (see [`ElasticSettings::tet_compliance`]), `hs2` the squared substep,
-    /// `gamma` XPBD's damping term. Needs `refresh_shape_bundles` this step.
-    pub(crate) fn project_tet_shapes(&mut self, compliance: [f32; 2], hs2: f32, gamma: f32) {
-        let x = &mut self.positions;
-        let start = &self.scratch.predicted;
-        let gamma = f32x4::splat(gamma);
-        let one_plus_gamma = f32x4::ONE + gamma;
-        let half = f32x4::splat(0.5);
-        for b in &self.scratch.shape_bundles {
-            let g = &b.gradients;
-            // Written out, not mapped: a closure per lane was not inlined.
-            let corner = |[a, b, c, d]: [usize; LANES]| Vec3x4::from_vecs([x[a], x[b], x[c], x[d]]);
-            let start_corner = |[a, b, c, d]: [usize; LANES]| {
-                Vec3x4::from_rows([
-                    start[a].row(),
-                    start[b].row(),
-                    start[c].row(),
-                    start[d].row(),
-                ])
-            };
-            let [l0, l1, l2, l3] = b.corners;
-            let mut f = Mat3x4::deformation(&[corner(l0), corner(l1), corner(l2), corner(l3)], g);
-            let f_start = Mat3x4::deformation(
-                &[
-                    start_corner(l0),
-                    start_corner(l1),
-                    start_corner(l2),
-                    start_corner(l3),
-                ],
-                g,
-            );
-            // Each constraint's compliance over `h_s^2`; infinite in an empty lane, whose
-            // multipliers are then zero (and its corners have no mass).
-            let scaled = b.rest_volume * f32x4::splat(hs2);
-            let [deviatoric, hydrostatic] = compliance.map(|c| f32x4::splat(c) / scaled);
-            // `total` is the sum of `lambda` times each constraint's gradient on `F`: the
-            // corners move by `w_k total g_k` at the end.
-            let mut total = Mat3x4::ZERO;
-            let mut project = |grad: Mat3x4, constraint: f32x4, f: &mut Mat3x4, alpha: f32x4| {
-                let gs = grad.mul_sym(&b.gram);
-                let denominator = gs.frobenius(&grad);
-                let rate = grad.frobenius(&f.sub(&f_start));
-                let lambda = -(constraint + gamma * rate) / (one_plus_gamma * denominator + alpha);
-                let lambda = lambda.is_finite().blend(lambda, f32x4::ZERO);
-                total.add_scaled(&grad, lambda);
-                f.add_scaled(&gs, lambda);
-            };
-            for k in 0..5 {
-                let grad = f.deviatoric_gradient(k);
-                // `<B_k, E>` = `<F B_k, F> / 2` (`B_k` is traceless).
-                let constraint = half * grad.frobenius(&f);
-                project(grad, constraint, &mut f, deviatoric);
-            }
-            let cofactor = f.cofactor();
-            let det = f.0[0].dot(cofactor.0[0]);
-            project(cofactor, det - f32x4::ONE, &mut f, hydrostatic);
-            let moves: [[Vec3; LANES]; 4] =
-                std::array::from_fn(|k| total.mul_vec(g[k]).scale(b.inv_masses[k]).to_vecs());
-            for (corners, moves) in b.corners.iter().zip(&moves) {
-                for ((&i, &dx), _) in corners.iter().zip(moves).zip(b.filled).filter(|(_, f)| *f) {
-                    x[i] += dx;
-                }
+/// One pass over the tets' shape constraints (see the module's doc), bundle by bundle: per
+/// tet the five deviatoric ones in turn, then the hydrostatic one. `compliance` is theirs
+/// per unit volume (see [`ElasticSettings::tet_compliance`]), `hs2` the squared substep,
+/// `gamma` XPBD's damping term; `x` the positions it moves, `start` the predicted positions at
+/// the start of the step. Needs `refresh_shape_bundles` this step.
+pub(crate) fn project_tet_shapes(
+    bundles: &[ShapeBundle],
+    x: &mut [Vec3],
+    start: &[Point4],
+    compliance: [f32; 2],
+    hs2: f32,
+    gamma: f32,
+) {
+    let gamma = f32x4::splat(gamma);
+    let one_plus_gamma = f32x4::ONE + gamma;
+    let half = f32x4::splat(0.5);
+    for b in bundles {
+        let g = &b.gradients;
+        // Written out, not mapped: a closure per lane was not inlined.
+        let corner = |[a, b, c, d]: [usize; LANES]| Vec3x4::from_vecs([x[a], x[b], x[c], x[d]]);
+        let start_corner = |[a, b, c, d]: [usize; LANES]| {
+            Vec3x4::from_rows([
+                start[a].row(),
+                start[b].row(),
+                start[c].row(),
+                start[d].row(),
+            ])
+        };
+        let [l0, l1, l2, l3] = b.corners;
+        let mut f = Mat3x4::deformation(&[corner(l0), corner(l1), corner(l2), corner(l3)], g);
+        let f_start = Mat3x4::deformation(
+            &[
+                start_corner(l0),
+                start_corner(l1),
+                start_corner(l2),
+                start_corner(l3),
+            ],
+            g,
+        );
+        // Each constraint's compliance over `h_s^2`; infinite in an empty lane, whose
+        // multipliers are then zero (and its corners have no mass).
+        let scaled = b.rest_volume * f32x4::splat(hs2);
+        let [deviatoric, hydrostatic] = compliance.map(|c| f32x4::splat(c) / scaled);
+        // `total` is the sum of `lambda` times each constraint's gradient on `F`: the
+        // corners move by `w_k total g_k` at the end.
+        let mut total = Mat3x4::ZERO;
+        let mut project = |grad: Mat3x4, constraint: f32x4, f: &mut Mat3x4, alpha: f32x4| {
+            let gs = grad.mul_sym(&b.gram);
+            let denominator = gs.frobenius(&grad);
+            let rate = grad.frobenius(&f.sub(&f_start));
+            let lambda = -(constraint + gamma * rate) / (one_plus_gamma * denominator + alpha);
+            let lambda = lambda.is_finite().blend(lambda, f32x4::ZERO);
+            total.add_scaled(&grad, lambda);
+            f.add_scaled(&gs, lambda);
+        };
+        for k in 0..5 {
+            let grad = f.deviatoric_gradient(k);
+            // `<B_k, E>` = `<F B_k, F> / 2` (`B_k` is traceless).
+            let constraint = half * grad.frobenius(&f);
+            project(grad, constraint, &mut f, deviatoric);
+        }
+        let cofactor = f.cofactor();
+        let det = f.0[0].dot(cofactor.0[0]);
+        project(cofactor, det - f32x4::ONE, &mut f, hydrostatic);
+        let moves: [[Vec3; LANES]; 4] =
+            std::array::from_fn(|k| total.mul_vec(g[k]).scale(b.inv_masses[k]).to_vecs());
+        for (corners, moves) in b.corners.iter().zip(&moves) {
+            for ((&i, &dx), _) in corners.iter().zip(moves).zip(b.filled).filter(|(_, f)| *f) {
+                x[i] += dx;
             }
         }
     }
@@ -336,6 +338,7 @@ mod tests {
     use std::sync::Arc;
 
     use super::*;
+    use crate::core::body::SoftBodyState;
     use crate::core::material::SoftBodyMaterial;
     use crate::core::tet_mesh::TetMesh;
 
@@ -391,9 +394,16 @@ mod tests {
         for (p, &x) in body.scratch.predicted.iter_mut().zip(&body.positions) {
             *p = super::super::lanes::Point4::new(x);
         }
-        body.refresh_shape_bundles();
+        refresh_shape_bundles(&mut body.scratch.shape_bundles, &body.inv_masses);
         let before = body.volume_metrics().volume as f32;
-        body.project_tet_shapes(compliance, 1e-4, 0.0);
+        project_tet_shapes(
+            &body.scratch.shape_bundles,
+            &mut body.positions,
+            &body.scratch.predicted,
+            compliance,
+            1e-4,
+            0.0,
+        );
         (body, before)
     }
 

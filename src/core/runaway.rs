@@ -6,8 +6,6 @@
 
 use glam::Vec3;
 
-use super::body::SoftBodyState;
-
 /// When a body counts as running away.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct RunawayLimits {
@@ -41,73 +39,59 @@ pub struct Runaway {
     pub reset_to: Vec3,
 }
 
-impl SoftBodyState {
-    /// The limits past which a body is caught running away.
-    pub fn runaway_limits(&self) -> RunawayLimits {
-        self.runaway_limits
-    }
+/// What the runaway check reads of a body after a step: its fastest particle's speed, its
+/// extent (bounding-box diagonal) and its centre of mass.
+pub(crate) struct BodyMotion {
+    pub(crate) speed: f32,
+    pub(crate) extent: f32,
+    pub(crate) centre: Vec3,
+}
 
-    /// Sets the limits past which a body is caught running away.
-    pub fn set_runaway_limits(&mut self, limits: RunawayLimits) {
-        self.runaway_limits = limits;
-    }
-
-    /// The runaway caught in the last step, if any.
-    pub fn runaway(&self) -> Option<Runaway> {
-        self.runaway
-    }
-
-    /// Checks the body after its positions moved (the end of a step): past the limits, it is
-    /// put back in its rest shape (translated so that its centre of mass is at the last sane
-    /// one, at rest), and the step records a [`Runaway`]; otherwise this centre becomes the
-    /// last sane one.
-    pub(crate) fn catch_runaway(&mut self) {
-        let limits = self.runaway_limits;
+impl BodyMotion {
+    /// Measures the particles at `positions` with `velocities` and `masses`.
+    pub(crate) fn measure(positions: &[Vec3], velocities: &[Vec3], masses: &[f32]) -> Self {
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         let mut max_speed2 = 0.0f32;
         let (mut weighted, mut mass) = (Vec3::ZERO, 0.0);
-        for ((&x, &v), &m) in self
-            .positions
-            .iter()
-            .zip(&self.velocities)
-            .zip(&self.masses)
-        {
+        for ((&x, &v), &m) in positions.iter().zip(velocities).zip(masses) {
             lo = lo.min(x);
             hi = hi.max(x);
             max_speed2 = max_speed2.max(v.length_squared());
             weighted += m * x;
             mass += m;
         }
-        let extent = (hi - lo).length();
-        let speed = max_speed2.sqrt();
-        let centre = weighted / mass;
-        let sane = speed <= limits.max_speed
-            && extent <= limits.max_stretch * self.rest_extent
-            && centre.is_finite();
-        if sane {
-            self.sane_centre = Some(centre);
-            return;
+        BodyMotion {
+            speed: max_speed2.sqrt(),
+            extent: (hi - lo).length(),
+            centre: weighted / mass,
         }
-        let rest = self.mesh.positions();
-        let rest_centre = rest
-            .iter()
-            .zip(&self.masses)
-            .map(|(&x, &m)| m * x)
-            .sum::<Vec3>()
-            / mass;
-        let reset_to = self.sane_centre.unwrap_or(rest_centre);
-        for (x, &x0) in self.positions.iter_mut().zip(rest) {
-            *x = x0 - rest_centre + reset_to;
-        }
-        self.previous_positions.copy_from_slice(&self.positions);
-        self.velocities.fill(Vec3::ZERO);
-        self.runaway = Some(Runaway {
-            speed,
-            extent,
-            rest_extent: self.rest_extent,
-            reset_to,
-        });
     }
+}
+
+impl RunawayLimits {
+    /// Whether a body of rest extent `rest_extent` moving as `motion` is within the limits.
+    pub(crate) fn allow(&self, motion: &BodyMotion, rest_extent: f32) -> bool {
+        motion.speed <= self.max_speed
+            && motion.extent <= self.max_stretch * rest_extent
+            && motion.centre.is_finite()
+    }
+}
+
+/// Puts the particles back in their `rest` shape, translated so that the centre of mass is at
+/// `sane_centre` (the rest shape's own centre if the body never was sane). Returns that centre.
+pub(crate) fn put_back_at_rest(
+    rest: &[Vec3],
+    masses: &[f32],
+    sane_centre: Option<Vec3>,
+    positions: &mut [Vec3],
+) -> Vec3 {
+    let mass: f32 = masses.iter().sum();
+    let rest_centre = rest.iter().zip(masses).map(|(&x, &m)| m * x).sum::<Vec3>() / mass;
+    let reset_to = sane_centre.unwrap_or(rest_centre);
+    for (x, &x0) in positions.iter_mut().zip(rest) {
+        *x = x0 - rest_centre + reset_to;
+    }
+    reset_to
 }
 
 #[cfg(test)]
@@ -116,7 +100,7 @@ mod tests {
 
     use glam::{UVec3, Vec3};
 
-    use super::*;
+    use crate::core::body::SoftBodyState;
     use crate::core::{SoftBodyMaterial, box_grid};
 
     #[test]

@@ -11,9 +11,8 @@
 //! fraction of a millimetre (PERFORMANCE.md, stop 30). It wakes when a step finds it disturbed:
 //! gravity changed, a kinematic particle asked to move, a rigid sphere within reach of its
 //! bounds, a collider near it moved, appeared or went away; or when the game touches it
-//! ([`SoftBodyState::velocities_mut`], [`SoftBodyState::translate`],
-//! [`SoftBodyState::map_positions`],
-//! [`SoftBodyState::set_material`], [`SoftBodyState::wake_up`]). A sphere in reach keeps it
+//! (`SoftBodyState::velocities_mut`, `translate`, `map_positions`, `set_material`,
+//! `wake_up`). A sphere in reach keeps it
 //! awake: a sleeping body would not hold a sphere up. The paper's explicit springs never sleep,
 //! so its scenes run as published.
 
@@ -22,7 +21,6 @@ use std::hash::{Hash, Hasher};
 use glam::Vec3;
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
-use super::body::SoftBodyState;
 use super::colliders::{ColliderInstance, RigidSphereState};
 
 /// When a body falls asleep.
@@ -97,58 +95,31 @@ fn colliders_near(bounds: &Aabb, colliders: &[ColliderInstance]) -> u64 {
     hasher.finish()
 }
 
-impl SoftBodyState {
-    /// When the body falls asleep; `None` if it never does.
-    pub fn sleep_settings(&self) -> Option<SleepSettings> {
-        self.sleep.settings
+impl Sleep {
+    /// The mean speed under which the body counts as still (0 if it never sleeps).
+    pub(crate) fn speed_or_zero(&self) -> f32 {
+        self.settings.map_or(0.0, |s| s.speed)
     }
 
-    /// Sets when the body falls asleep (`None`: never; it wakes if asleep). Bodies stepped in
-    /// substeps sleep by default; the paper's explicit springs never do.
-    pub fn set_sleep_settings(&mut self, settings: Option<SleepSettings>) {
-        self.sleep.settings = settings;
-        self.sleep.wake();
-    }
-
-    /// Whether the body is asleep: at rest, not stepped until something disturbs it.
-    pub fn is_sleeping(&self) -> bool {
-        self.sleep.asleep
-    }
-
-    /// Wakes the body if it sleeps, and restarts the time it must be quiet to fall asleep.
-    pub fn wake_up(&mut self) {
-        self.sleep.wake();
-    }
-
-    /// The body's bounds grown by how far a sphere or collider may be and still disturb it: a
-    /// tenth of its rest size.
-    fn reach_bounds(&self) -> Aabb {
-        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
-        for &x in &self.positions {
-            lo = lo.min(x);
-            hi = hi.max(x);
-        }
-        Aabb::new(lo, hi).loosened(0.1 * self.rest_extent)
-    }
-
-    /// At the start of a substepped step, for a sleeping body: wakes it if the step disturbs
-    /// it. Returns whether it still sleeps (the step then leaves it alone).
+    /// At the start of a substepped step of `h`, for a body in `gravity` (`moved_kinematic`:
+    /// a kinematic particle asked to move further than the sleep speed allows): wakes it if
+    /// asleep and the step disturbs it. Returns whether it still sleeps (the step then leaves
+    /// it alone, its velocities zero).
     pub(crate) fn stays_asleep(
         &mut self,
         h: f32,
+        moved_kinematic: bool,
+        gravity: Vec3,
         spheres: &[RigidSphereState],
         colliders: &[ColliderInstance],
     ) -> bool {
-        if !self.sleep.asleep {
+        if !self.asleep {
             return false;
         }
-        let Some(bounds) = self.sleep.bounds else {
-            self.sleep.wake();
+        let Some(bounds) = self.bounds else {
+            self.wake();
             return false;
         };
-        let moved_kinematic = self.kinematic_targets().any(|(i, target)| {
-            (target - self.positions[i]).length() > self.sleep_speed_or_zero() * h
-        });
         let sphere_near = spheres.iter().any(|s| {
             let reach = s.radius + h * s.velocity.length();
             bounds.contains_local_point(s.position)
@@ -158,53 +129,50 @@ impl SoftBodyState {
                 )
                 .intersects(&bounds)
         });
-        let disturbed = self.gravity != self.sleep.gravity
+        let disturbed = gravity != self.gravity
             || moved_kinematic
             || sphere_near
-            || colliders_near(&bounds, colliders) != self.sleep.colliders;
+            || colliders_near(&bounds, colliders) != self.colliders;
         if disturbed {
-            self.sleep.wake();
+            self.wake();
             return false;
         }
-        // Still asleep: kinematic particles stay where they are, nothing moves.
-        self.velocities.fill(Vec3::ZERO);
         true
     }
 
-    fn sleep_speed_or_zero(&self) -> f32 {
-        self.sleep.settings.map_or(0.0, |s| s.speed)
-    }
-
-    /// At the end of a substepped step of `h`: counts the time every particle has stayed
-    /// within reach of where it stood when the quiet time began (starting it anew from here
-    /// when one has not), and puts the body to sleep once that is long enough and no sphere
-    /// is within reach.
-    pub(crate) fn update_sleep(
+    /// At the end of a substepped step of `h`, for a body of rest extent `rest_extent` at
+    /// `positions` in `gravity`: counts the time every particle has stayed within reach of
+    /// where it stood when the quiet time began (starting it anew from here when one has not),
+    /// and puts the body to sleep once that is long enough and no sphere is within reach.
+    /// Returns whether it fell asleep now (its velocities are then to be zeroed).
+    pub(crate) fn update(
         &mut self,
         h: f32,
+        positions: &[Vec3],
+        rest_extent: f32,
+        gravity: Vec3,
         spheres: &[RigidSphereState],
         colliders: &[ColliderInstance],
-    ) {
-        let Some(settings) = self.sleep.settings else {
-            return;
+    ) -> bool {
+        let Some(settings) = self.settings else {
+            return false;
         };
         let reach = settings.speed * settings.time;
-        let moved = self.sleep.quiet_for == 0.0
-            || self
-                .positions
+        let moved = self.quiet_for == 0.0
+            || positions
                 .iter()
-                .zip(&self.sleep.still_at)
+                .zip(&self.still_at)
                 .any(|(x, still)| x.distance_squared(*still) > reach * reach);
         if moved {
-            self.sleep.still_at.copy_from_slice(&self.positions);
-            self.sleep.quiet_for = h;
-            return;
+            self.still_at.copy_from_slice(positions);
+            self.quiet_for = h;
+            return false;
         }
-        self.sleep.quiet_for += h;
-        if self.sleep.quiet_for < settings.time {
-            return;
+        self.quiet_for += h;
+        if self.quiet_for < settings.time {
+            return false;
         }
-        let bounds = self.reach_bounds();
+        let bounds = reach_bounds(positions, rest_extent);
         let sphere_near = spheres.iter().any(|s| {
             Aabb::new(
                 s.position - Vec3::splat(s.radius),
@@ -213,14 +181,25 @@ impl SoftBodyState {
             .intersects(&bounds)
         });
         if sphere_near {
-            return;
+            return false;
         }
-        self.sleep.asleep = true;
-        self.sleep.bounds = Some(bounds);
-        self.sleep.gravity = self.gravity;
-        self.sleep.colliders = colliders_near(&bounds, colliders);
-        self.velocities.fill(Vec3::ZERO);
+        self.asleep = true;
+        self.bounds = Some(bounds);
+        self.gravity = gravity;
+        self.colliders = colliders_near(&bounds, colliders);
+        true
     }
+}
+
+/// The bounds of `positions` grown by how far a sphere or collider may be and still disturb
+/// the body: a tenth of its rest extent.
+fn reach_bounds(positions: &[Vec3], rest_extent: f32) -> Aabb {
+    let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+    for &x in positions {
+        lo = lo.min(x);
+        hi = hi.max(x);
+    }
+    Aabb::new(lo, hi).loosened(0.1 * rest_extent)
 }
 
 #[cfg(test)]
@@ -232,7 +211,7 @@ mod tests {
     use parry3d::shape::SharedShape;
 
     use super::*;
-    use crate::core::{SoftBodyMaterial, box_grid};
+    use crate::core::{SoftBodyMaterial, SoftBodyState, box_grid};
 
     fn ground() -> ColliderInstance {
         ColliderInstance::new(SharedShape::halfspace(Vec3::Y), Pose::IDENTITY, 0.8)

@@ -30,6 +30,7 @@ use glam::Vec3;
 
 use super::body::SoftBodyState;
 use super::colliders::{ColliderInstance, RigidSphereState};
+use super::deviatoric::{project_tet_shapes, refresh_shape_bundles};
 use super::geometry::{signed_volume, volume_gradients};
 use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};
@@ -144,7 +145,7 @@ impl SoftBodyState {
             _ => None,
         };
         if tet_compliance.is_some() {
-            self.refresh_shape_bundles();
+            refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
         }
         for k in 0..substeps {
             // Predict; `predicted` holds where each particle started the substep.
@@ -156,7 +157,14 @@ impl SoftBodyState {
                 self.positions[i] += hs * self.velocities[i];
             }
             match tet_compliance {
-                Some(compliance) => self.project_tet_shapes(compliance, hs2, shape_damping),
+                Some(compliance) => project_tet_shapes(
+                    &self.scratch.shape_bundles,
+                    &mut self.positions,
+                    &self.scratch.predicted,
+                    compliance,
+                    hs2,
+                    shape_damping,
+                ),
                 None => self.project_edges(hs2, shape_damping),
             }
             if volumes {
