@@ -28,12 +28,14 @@ pub mod components;
 pub mod core;
 #[cfg(feature = "render")]
 pub mod debug;
+#[cfg(any(test, feature = "scenes"))]
 pub mod game_scenes;
 #[cfg(feature = "egui")]
 pub mod inspector;
 #[cfg(feature = "render")]
 pub mod loading;
 pub mod plugin;
+#[cfg(any(test, feature = "scenes"))]
 pub mod scenes;
 #[cfg(feature = "render")]
 pub mod surface;

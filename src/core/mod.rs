@@ -1,32 +1,32 @@
 //! The simulation core: plain Rust on glam, no ECS types. Data lives in flat arrays indexed by
 //! particle, tet and edge; a step allocates nothing.
 
-pub mod blocks;
-pub mod body;
+pub(crate) mod blocks;
+pub(crate) mod body;
 pub(crate) mod chunks;
-pub mod colliders;
-pub mod contacts;
-pub mod deviatoric;
-pub mod embedding;
-pub mod forces;
-pub mod geometry;
-pub mod grid;
-pub mod impulses;
-pub mod lanes;
-pub mod material;
-pub mod obj;
-pub mod parallel;
-pub mod reference;
-pub mod roots;
-pub mod runaway;
-pub mod sleep;
-pub mod step;
-pub mod surface_mesh;
-pub mod tet_mesh;
-pub mod tetgen;
-pub mod tetrahedralize;
-pub mod winding;
-pub mod xpbd;
+pub(crate) mod colliders;
+pub(crate) mod contacts;
+pub(crate) mod deviatoric;
+pub(crate) mod embedding;
+pub(crate) mod forces;
+pub(crate) mod geometry;
+pub(crate) mod grid;
+pub(crate) mod impulses;
+pub(crate) mod lanes;
+pub(crate) mod material;
+pub(crate) mod obj;
+pub(crate) mod parallel;
+pub(crate) mod reference;
+pub(crate) mod roots;
+pub(crate) mod runaway;
+pub(crate) mod sleep;
+pub(crate) mod step;
+pub(crate) mod surface_mesh;
+pub(crate) mod tet_mesh;
+pub(crate) mod tetgen;
+pub(crate) mod tetrahedralize;
+pub(crate) mod winding;
+pub(crate) mod xpbd;
 
 pub use body::{ParticleIndexError, SoftBodyState, VolumeMetrics};
 pub use colliders::{ColliderInstance, RigidSphereState};

@@ -32,7 +32,8 @@ enum Touching {
 /// The smallest root of `c` in `(0, hi]` (use `f64::INFINITY` for no bound), counting roots
 /// where the polynomial touches zero without changing sign (double roots). `None` when there is
 /// none, or when a coefficient is not finite.
-pub fn smallest_positive_root(c: &Cubic, hi: f64) -> Option<f64> {
+#[cfg(test)]
+pub(crate) fn smallest_positive_root(c: &Cubic, hi: f64) -> Option<f64> {
     first_root(c, hi, Touching::Count)
 }
 

@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-pub use super::blocks::{Blocks, Csr, NO_TET, bundle_disjoint};
+pub use super::blocks::{Blocks, Csr, NO_TET};
 use super::geometry::{min_dihedral_deg, signed_volume};
 
 /// What is wrong with a tet mesh given to [`TetMesh::new`].
