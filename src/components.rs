@@ -116,6 +116,22 @@ pub struct PinnedParticles(pub Vec<u32>);
 /// Particles of the [`SoftBody`] on the same entity that follow the [`Transform`] of
 /// `target`, keeping the offset they had from it when first seen (the turned end of the
 /// twisted bar, a grabbed handle). Remove the component to release them.
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::{core::box_grid, prelude::*};
+///
+/// # let mut world = World::new();
+/// # let mut commands = world.commands();
+/// // A jelly bar whose left end rides a platform the game moves.
+/// let mesh = box_grid(UVec3::new(8, 2, 2), Vec3::splat(0.05), Vec3::ZERO).unwrap();
+/// let left: Vec<u32> = (0..mesh.positions().len() as u32)
+///     .filter(|&i| mesh.positions()[i as usize].x < 0.01)
+///     .collect();
+/// let platform = commands.spawn(Transform::from_xyz(0.0, 1.0, 0.0)).id();
+/// let bar = SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
+/// commands.spawn((bar, DrivenParticles::new(platform, left), Transform::from_xyz(0.0, 1.0, 0.0)));
+/// ```
 #[derive(Component, Clone, Debug, Reflect)]
 #[reflect(Component)]
 pub struct DrivenParticles {

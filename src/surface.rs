@@ -27,6 +27,31 @@ use crate::core::SurfaceBinding;
 use crate::plugin::SoftBodyTiming;
 
 /// Deforms the [`Mesh3d`] of its entity to follow the particles of the soft body `body`.
+/// The mesh is given in the tet mesh's rest frame, usually finer than the tets; each vertex is
+/// bound to the tet holding it (or the nearest one) when first seen.
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::core::{box_grid, subdivided_box};
+/// use bevy_soft_body::prelude::*;
+/// use bevy_soft_body::surface_mesh;
+///
+/// fn spawn_jelly(mut commands: Commands, mut meshes: ResMut<Assets<Mesh>>) {
+///     // A 0.5 m cube of 4 x 4 x 4 cells drawn as a box with 2.5 cm faces.
+///     let tets = box_grid(UVec3::splat(4), Vec3::splat(0.125), Vec3::ZERO).unwrap();
+///     let jelly = SoftBody::new(tets.into(), SoftBodyMaterial::JELLY).unwrap();
+///     let body = commands.spawn((jelly, Transform::from_xyz(0.0, 1.0, 0.0))).id();
+///     let detail = subdivided_box(Vec3::ZERO, Vec3::splat(0.5), 0.025);
+///     commands
+///         .entity(body)
+///         .insert((SoftBodySurface::new(body), Mesh3d(meshes.add(surface_mesh(&detail)))));
+/// }
+/// # let mut app = App::new();
+/// # app.add_plugins((MinimalPlugins, AssetPlugin::default(), bevy::mesh::MeshPlugin));
+/// # app.add_plugins((SoftBodyPlugin::default(), SoftBodySurfacePlugin));
+/// # app.add_systems(Startup, spawn_jelly);
+/// # app.update();
+/// ```
 #[derive(Component, Debug)]
 #[require(Transform)]
 pub struct SoftBodySurface {
