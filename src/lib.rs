@@ -65,8 +65,8 @@ pub use surface::SoftBodySurfaceSet;
 pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSystems, surface_mesh};
 
 /// The crate's plugins a game adds in one go: [`SoftBodyPlugin`] (the simulation), and with
-/// feature `render` [`SoftBodySurfacePlugin`](SoftBodySurfacePlugin) (render meshes that
-/// follow the bodies) and [`SoftBodyAssetPlugin`](SoftBodyAssetPlugin) (bodies from
+/// feature `render` [`SoftBodySurfacePlugin`] (render meshes that
+/// follow the bodies) and [`SoftBodyAssetPlugin`] (bodies from
 /// meshes and files; it needs Bevy's asset and mesh plugins, as in `DefaultPlugins`). Each part
 /// can be replaced or left out, as in any plugin group:
 ///

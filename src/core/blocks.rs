@@ -93,19 +93,19 @@ pub struct Blocks {
     pub vertices: Csr,
     /// Tets of each task (the block of their lowest layers), in index order.
     pub tets: Csr,
-    /// The same tets of each task in bundles of [`LANES`] that share no vertex, padded with
-    /// [`NO_TET`] (see [`bundle_disjoint`]): the per-tet pass computes a bundle's tets side by side
+    /// The same tets of each task in bundles of `LANES` that share no vertex, padded with
+    /// `NO_TET` (see `bundle_disjoint`): the per-tet pass computes a bundle's tets side by side
     /// in SIMD lanes, and since no impulse of a bundle moves a particle of another, that is
     /// exactly the four impulses one after another.
     pub tet_bundles: Csr,
     /// The corners of each item of [`Blocks::tet_bundles`], in the same order (`[0; 4]` for
-    /// [`NO_TET`]), and their rest volumes (0 for [`NO_TET`]): the per-tet pass reads them
+    /// `NO_TET`), and their rest volumes (0 for `NO_TET`): the per-tet pass reads them
     /// front to back instead of looking each tet up across the mesh's arrays.
     pub bundle_corners: Vec<[u32; 4]>,
     /// See [`Blocks::bundle_corners`].
     pub bundle_rest_volumes: Vec<f32>,
     /// Springs (indices into [`TetMesh::edges`](super::tet_mesh::TetMesh::edges)) of each task, in the order of their bundles
-    /// of [`LANES`] that share no vertex (see [`bundle_disjoint`]), without the padding. The
+    /// of `LANES` that share no vertex (see `bundle_disjoint`), without the padding. The
     /// mesh numbers its edges in this order, so the rows hold `0, 1, 2, ...` one after another.
     pub edges: Csr,
     /// For each task, the earlier tasks it must wait for: its neighbouring blocks of earlier

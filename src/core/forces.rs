@@ -35,7 +35,7 @@ impl SoftBodyState {
     }
 
     /// [`SoftBodyState::apply_forces`] with the mesh's blocks run by `parallel`: the same
-    /// result bit for bit on any number of threads (see [`super::parallel`]). Springs (and the
+    /// result bit for bit on any number of threads (see `core::parallel`). Springs (and the
     /// baseline's tets) add their forces block by block in the blocks' order, then each
     /// particle's velocity takes its force, then the dampers act block by block, then drag.
     pub fn apply_forces_on(&mut self, h: f32, gravity: Vec3, parallel: &dyn Parallel) {

@@ -16,7 +16,7 @@ impl SoftBodyState {
     }
 
     /// [`SoftBodyState::one_ring_pass`] with the mesh's blocks run by `parallel`: the same
-    /// result bit for bit on any number of threads (see [`super::parallel`]).
+    /// result bit for bit on any number of threads (see `core::parallel`).
     pub fn one_ring_pass_on(
         &mut self,
         h: f32,

@@ -92,7 +92,7 @@ pub enum TetrahedralizeError {
         /// The cell size used.
         cell_size: f32,
     },
-    /// The cell size would make more than [`MAX_TARGET_TETS`] tets.
+    /// The cell size would make more than `MAX_TARGET_TETS` tets.
     #[error("{tets} tets at cell size {cell_size} is more than the limit of {MAX_TARGET_TETS}")]
     TooManyTets {
         /// Tets the cell size would make.

@@ -1,0 +1,92 @@
+//! The soft body component: a tet mesh, a material and the simulation state they make.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use bevy::prelude::*;
+
+use super::SoftBodyStats;
+use crate::core::{MaterialError, SoftBodyMaterial, SoftBodyState, TetMesh};
+
+/// A soft body. Spawn it with a [`Transform`] that places its tet mesh in the world (the mesh
+/// is given in its own local frame); on its first step the plugin moves the particles there.
+///
+/// The particles are simulated in world space. After placement the entity's [`Transform`]
+/// follows the body: its translation is the centre of mass, its rotation and scale identity,
+/// so a camera or child entity can follow it. A scale in the spawn transform is baked into the
+/// rest shape (the tet mesh is rebuilt at that scale).
+///
+/// A jelly cube dropped on the ground, stepped headless (a game adds `DefaultPlugins` instead
+/// and lets the fixed clock run):
+///
+/// ```
+/// use std::time::Duration;
+///
+/// use bevy::prelude::*;
+/// use bevy::time::TimeUpdateStrategy;
+/// use bevy_soft_body::{core::box_grid, prelude::*};
+///
+/// let mut app = App::new();
+/// app.add_plugins((MinimalPlugins, SoftBodyPlugin::default()))
+///     // Every update advances the clock by one step of the plugin's 10 ms.
+///     .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(10)));
+/// // A 0.5 m cube of 4 cells a side (320 tets), its lowest point 0.3 m up.
+/// let mesh = box_grid(UVec3::splat(4), Vec3::splat(0.125), Vec3::ZERO).unwrap();
+/// let jelly = SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
+/// let jelly = app.world_mut().spawn((jelly, Transform::from_xyz(0.0, 0.3, 0.0))).id();
+/// app.world_mut()
+///     .spawn((StaticCollider::ground(0.8), Transform::default()));
+/// for _ in 0..=100 {
+///     app.update();
+/// }
+/// // A second later it has landed, squashed and kept its volume.
+/// let stats = app.world().get::<SoftBodyStats>(jelly).unwrap();
+/// assert!(stats.peak_volume_error_pct.abs() < 1.0);
+/// let centre = app.world().get::<Transform>(jelly).unwrap().translation;
+/// assert!(centre.y < 0.3 && centre.y > 0.1, "{centre}");
+/// ```
+#[derive(Component)]
+#[require(Transform, SoftBodyStats)]
+pub struct SoftBody {
+    pub(crate) state: SoftBodyState,
+    pub(crate) placed: bool,
+    /// The scale of the spawn transform, baked into the rest shape at placement.
+    pub(crate) rest_scale: Vec3,
+    pub(crate) step_time: Duration,
+    /// This body's copy of the rigid spheres during a stage that runs bodies in parallel.
+    pub(crate) spheres: Vec<crate::core::RigidSphereState>,
+}
+
+impl SoftBody {
+    /// A soft body of `mesh`, made of `material`.
+    pub fn new(mesh: Arc<TetMesh>, material: SoftBodyMaterial) -> Result<Self, MaterialError> {
+        Ok(SoftBody {
+            state: SoftBodyState::new(mesh, material)?,
+            placed: false,
+            rest_scale: Vec3::ONE,
+            step_time: Duration::ZERO,
+            spheres: Vec::new(),
+        })
+    }
+
+    /// The simulation state: particles, springs, material.
+    pub fn state(&self) -> &SoftBodyState {
+        &self.state
+    }
+
+    /// The simulation state, to change velocities or the material at run time.
+    pub fn state_mut(&mut self) -> &mut SoftBodyState {
+        &mut self.state
+    }
+
+    /// Whether the body has been placed at its spawn transform yet.
+    pub fn is_placed(&self) -> bool {
+        self.placed
+    }
+
+    /// The scale of the spawn transform, which the rest shape (`state().mesh()`) includes:
+    /// a point of the mesh as given is at `point * rest_scale()` in the rest shape.
+    pub fn rest_scale(&self) -> Vec3 {
+        self.rest_scale
+    }
+}
