@@ -24,6 +24,8 @@
 //! ```
 #![warn(missing_docs)]
 
+#[cfg(feature = "avian")]
+pub mod avian;
 pub mod components;
 pub mod core;
 #[cfg(feature = "render")]
@@ -64,8 +66,9 @@ pub use surface::SoftBodySurfaceSet;
 #[cfg(feature = "render")]
 pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSystems, surface_mesh};
 
-/// The crate's plugins a game adds in one go: [`SoftBodyPlugin`] (the simulation), and with
-/// feature `render` [`SoftBodySurfacePlugin`] (render meshes that
+/// The crate's plugins a game adds in one go: [`SoftBodyPlugin`] (the simulation), with
+/// feature `avian` [`SoftBodyAvianPlugin`](crate::avian::SoftBodyAvianPlugin) (soft bodies
+/// among avian's rigid bodies), and with feature `render` [`SoftBodySurfacePlugin`] (render meshes that
 /// follow the bodies) and [`SoftBodyAssetPlugin`] (bodies from
 /// meshes and files; it needs Bevy's asset and mesh plugins, as in `DefaultPlugins`). Each part
 /// can be replaced or left out, as in any plugin group:
@@ -91,6 +94,8 @@ pub struct SoftBodyPlugins;
 impl bevy::app::PluginGroup for SoftBodyPlugins {
     fn build(self) -> bevy::app::PluginGroupBuilder {
         let group = bevy::app::PluginGroupBuilder::start::<Self>().add(SoftBodyPlugin::default());
+        #[cfg(feature = "avian")]
+        let group = group.add(avian::SoftBodyAvianPlugin);
         #[cfg(feature = "render")]
         let group = group
             .add(SoftBodySurfacePlugin)

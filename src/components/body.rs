@@ -55,6 +55,9 @@ pub struct SoftBody {
     pub(crate) step_time: Duration,
     /// This body's copy of the rigid spheres during a stage that runs bodies in parallel.
     pub(crate) spheres: Vec<crate::core::RigidSphereState>,
+    /// For each rigid body in the body's `RigidContacts`, its index among the step's rigid
+    /// bodies ([`SolverSpheres`](crate::plugin::SolverSpheres)'s `rigid`).
+    pub(crate) rigid_ids: Vec<u32>,
 }
 
 impl SoftBody {
@@ -66,6 +69,7 @@ impl SoftBody {
             rest_scale: Vec3::ONE,
             step_time: Duration::ZERO,
             spheres: Vec::new(),
+            rigid_ids: Vec::new(),
         })
     }
 

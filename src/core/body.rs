@@ -7,7 +7,7 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use super::chunks::{ChunkFindings, in_particle_chunks};
-use super::colliders::{ColliderInstance, RigidSphereState};
+use super::colliders::{ColliderInstance, CollisionFilter, RigidContacts, RigidSphereState};
 use super::deviatoric::{ShapeBundle, shape_bundles};
 use super::geometry::signed_volume;
 use super::impulses::{DriftTracking, PassWorker, SafeRadii, StepCounters};
@@ -101,6 +101,10 @@ pub struct SoftBodyState {
     pub(crate) shortest_edge: f32,
     /// Whether the body sleeps, and for how long it has been quiet (see `sleep.rs`).
     pub(crate) sleep: Sleep,
+    /// The colliders (static and rigid bodies') this body meets.
+    pub(crate) collision_filter: CollisionFilter,
+    /// The rigid bodies of another engine it may touch this step (`contacts.rs`).
+    pub(crate) rigid: RigidContacts,
     /// A step's working memory and the caches that only save it work (see [`StepScratch`]).
     pub(crate) scratch: StepScratch,
 }
@@ -178,6 +182,8 @@ impl SoftBodyState {
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
             sleep: Sleep::new(Some(Default::default()), n),
+            collision_filter: CollisionFilter::ALL,
+            rigid: RigidContacts::default(),
             runaway_limits: Default::default(),
             runaway: None,
             sane_centre: None,
@@ -536,6 +542,28 @@ impl SoftBodyState {
         self.sleep.wake();
     }
 
+    /// The bounds of where the particles are and where they would be after `h` at their
+    /// velocities; `None` for a body whose positions are not finite.
+    pub fn swept_bounds(&self, h: f32) -> Option<parry3d::bounding_volume::Aabb> {
+        let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
+        for (&x, &v) in self.positions.iter().zip(&self.velocities) {
+            let end = x + h * v;
+            lo = lo.min(x).min(end);
+            hi = hi.max(x).max(end);
+        }
+        (lo.is_finite() && hi.is_finite()).then(|| parry3d::bounding_volume::Aabb::new(lo, hi))
+    }
+
+    /// Which colliders this body meets (all by default).
+    pub fn collision_filter(&self) -> CollisionFilter {
+        self.collision_filter
+    }
+
+    /// Sets which colliders this body meets.
+    pub fn set_collision_filter(&mut self, filter: CollisionFilter) {
+        self.collision_filter = filter;
+    }
+
     /// Whether the body is asleep: at rest, not stepped until something disturbs it.
     pub fn is_sleeping(&self) -> bool {
         self.sleep.asleep
@@ -559,9 +587,11 @@ impl SoftBodyState {
             return false;
         }
         let reach = self.sleep.speed_or_zero() * h;
-        let moved_kinematic = self
-            .kinematic_targets()
-            .any(|(i, target)| (target - self.positions[i]).length() > reach);
+        // A rigid body of another engine that moves or can be pushed wakes it, as a sphere does.
+        let moved_kinematic = self.rigid.any_moving()
+            || self
+                .kinematic_targets()
+                .any(|(i, target)| (target - self.positions[i]).length() > reach);
         let still = self
             .sleep
             .stays_asleep(h, moved_kinematic, self.gravity, spheres, colliders);
@@ -579,6 +609,10 @@ impl SoftBodyState {
         spheres: &[RigidSphereState],
         colliders: &[ColliderInstance],
     ) {
+        if self.rigid.any_moving() {
+            self.sleep.wake();
+            return;
+        }
         let fell_asleep = self.sleep.update(
             h,
             &self.positions,

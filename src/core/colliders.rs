@@ -1,10 +1,11 @@
-//! What a soft body collides with: static colliders (any parry shape) and the dynamic rigid
+//! What a soft body collides with: static colliders (any parry shape), rigid bodies another
+//! engine simulates (avian3d's, through the `avian` feature: [`RigidContacts`]), and the dynamic rigid
 //! spheres the plugin simulates, with the spheres' own motion (gravity, contacts with static
 //! colliders) and the Coulomb friction both use (the combined friction of two surfaces is
 //! the geometric mean of their coefficients). The particles' contacts with them are in
 //! `contacts.rs`.
 
-use glam::Vec3;
+use glam::{Mat3, Quat, Vec3};
 use parry3d::bounding_volume::Aabb;
 use parry3d::math::Pose;
 use parry3d::query::contact;
@@ -25,6 +26,38 @@ pub struct ColliderInstance {
     /// of its plane: its bounds hold every particle, and a dot product answers what a
     /// point projection through `dyn Shape` answers at several times the cost.
     pub(crate) plane: Option<(Vec3, f32)>,
+    /// The soft bodies it meets.
+    pub filter: CollisionFilter,
+}
+
+/// Which soft bodies a collider meets, as avian's collision layers: two interact when each
+/// one's memberships meet the other's filters. [`CollisionFilter::ALL`] meets everything.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct CollisionFilter {
+    /// The layers it belongs to (a bit each).
+    pub memberships: u32,
+    /// The layers it meets.
+    pub filters: u32,
+}
+
+impl CollisionFilter {
+    /// In every layer, meeting every layer.
+    pub const ALL: CollisionFilter = CollisionFilter {
+        memberships: u32::MAX,
+        filters: u32::MAX,
+    };
+
+    /// Whether `self` and `other` meet.
+    #[inline]
+    pub fn interacts_with(self, other: CollisionFilter) -> bool {
+        self.memberships & other.filters != 0 && other.memberships & self.filters != 0
+    }
+}
+
+impl Default for CollisionFilter {
+    fn default() -> Self {
+        CollisionFilter::ALL
+    }
 }
 
 impl ColliderInstance {
@@ -40,7 +73,14 @@ impl ColliderInstance {
             pose,
             friction,
             plane,
+            filter: CollisionFilter::ALL,
         }
+    }
+
+    /// This collider meeting only the soft bodies that `filter` meets.
+    pub fn with_filter(mut self, filter: CollisionFilter) -> Self {
+        self.filter = filter;
+        self
     }
 
     /// How far `point` is inside this collider and the outward normal there, if it is inside.
@@ -133,5 +173,129 @@ impl RigidSphereState {
     /// `x += h v`.
     pub fn integrate_position(&mut self, h: f32) {
         self.position += h * self.velocity;
+    }
+}
+
+/// How a rigid body moves during a step, as the contacts see it: at its centre of mass, in the
+/// world frame.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RigidBodyMotion {
+    /// Centre of mass at the start of the step.
+    pub centre_of_mass: Vec3,
+    /// Velocity of the centre of mass.
+    pub linear_velocity: Vec3,
+    /// Angular velocity (radians per second about the world axes).
+    pub angular_velocity: Vec3,
+    /// Inverse mass; zero for a body nothing pushes (static, kinematic).
+    pub inv_mass: f32,
+    /// Inverse inertia tensor in the world frame; zero for a body nothing turns.
+    pub inv_inertia: Mat3,
+    /// The acceleration the other engine gives the body over this step (its gravity), already
+    /// in `linear_velocity`: a soft body solved in substeps hands it out per substep, as to
+    /// its particles, so that a body resting on it is held by the same substeps.
+    pub gravity: Vec3,
+}
+
+impl RigidBodyMotion {
+    /// A body that moves at `linear_velocity` and `angular_velocity` whatever touches it.
+    pub fn kinematic(centre_of_mass: Vec3, linear_velocity: Vec3, angular_velocity: Vec3) -> Self {
+        RigidBodyMotion {
+            centre_of_mass,
+            linear_velocity,
+            angular_velocity,
+            inv_mass: 0.0,
+            inv_inertia: Mat3::ZERO,
+            gravity: Vec3::ZERO,
+        }
+    }
+
+    /// Velocity of the body's point at offset `r` from its centre of mass.
+    #[inline]
+    pub fn velocity_at(&self, r: Vec3) -> Vec3 {
+        self.linear_velocity + self.angular_velocity.cross(r)
+    }
+
+    /// The inverse mass the body shows to an impulse along unit `direction` at offset `r`.
+    #[inline]
+    pub(crate) fn inv_mass_along(&self, r: Vec3, direction: Vec3) -> f32 {
+        let arm = r.cross(direction);
+        self.inv_mass + arm.dot(self.inv_inertia * arm)
+    }
+
+    /// Applies `impulse` at offset `r` from the centre of mass.
+    #[inline]
+    pub(crate) fn apply_impulse(&mut self, impulse: Vec3, r: Vec3) {
+        self.linear_velocity += self.inv_mass * impulse;
+        self.angular_velocity += self.inv_inertia * r.cross(impulse);
+    }
+
+    /// Where a frame at `pose` at the step's start is after `t` seconds of this motion, and where
+    /// the centre of mass is then.
+    #[inline]
+    pub(crate) fn advance(&self, pose: &Pose, t: f32) -> (Pose, Vec3) {
+        let turn = Quat::from_scaled_axis(self.angular_velocity * t);
+        let centre = self.centre_of_mass + t * self.linear_velocity;
+        let translation = centre + turn * (pose.translation - self.centre_of_mass);
+        let pose = Pose::from_parts(translation, (turn * pose.rotation).normalize());
+        (pose, centre)
+    }
+}
+
+/// A collider on a [`RigidBodyMotion`].
+#[derive(Clone)]
+pub struct RigidCollider {
+    /// Index of its body in [`RigidContacts::bodies`].
+    pub body: u32,
+    /// Its shape (scaled).
+    pub shape: SharedShape,
+    /// Its pose in the world at the start of the step.
+    pub pose: Pose,
+    /// Its friction coefficient.
+    pub friction: f32,
+    /// The soft bodies it meets.
+    pub filter: CollisionFilter,
+}
+
+/// The rigid bodies a soft body may touch in a step and their colliders: given by the game or
+/// the avian glue before the step (`SoftBodyState::rigid_contacts_mut`), their velocities read
+/// back after it.
+#[derive(Clone, Default)]
+pub struct RigidContacts {
+    /// The bodies' motions; the contacts change their velocities.
+    pub bodies: Vec<RigidBodyMotion>,
+    /// Their colliders.
+    pub colliders: Vec<RigidCollider>,
+}
+
+impl RigidContacts {
+    /// Removes every body and collider (keeping the buffers).
+    pub fn clear(&mut self) {
+        self.bodies.clear();
+        self.colliders.clear();
+    }
+
+    /// Whether any body here could push the soft body or be pushed by it.
+    pub(crate) fn any_moving(&self) -> bool {
+        self.bodies.iter().any(|b| {
+            b.inv_mass > 0.0 || b.linear_velocity != Vec3::ZERO || b.angular_velocity != Vec3::ZERO
+        })
+    }
+
+    /// Whether `end` lies inside a collider where it is `t` seconds into the step.
+    pub(crate) fn meets(&self, end: Vec3, t: f32) -> bool {
+        self.colliders.iter().any(|c| {
+            let (pose, _) = self.bodies[c.body as usize].advance(&c.pose, t);
+            c.shape.compute_aabb(&pose).contains_local_point(end)
+                && c.shape.project_point(&pose, end, false).is_inside
+        })
+    }
+}
+
+impl std::fmt::Debug for RigidContacts {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("RigidContacts")
+            .field("bodies", &self.bodies)
+            .field("colliders", &self.colliders.len())
+            .finish()
     }
 }

@@ -13,6 +13,15 @@
 //! `w_s / (w_p + w_s)` against a sphere, whose push back on the particle is what lets a soft
 //! body carry it.
 //!
+//! Rigid bodies that another engine simulates (see [`RigidContacts`]) are met the same way, at
+//! their colliders' predicted poses: each push is an impulse shared by the particle and the body
+//! through their effective inverse masses (the body's includes its inverse inertia at the contact
+//! point), so linear and angular momentum are conserved, and friction is Coulomb's on the relative
+//! velocity at the contact point. The volume passes keep the whole of a push into such a body
+//! (removing it, as against the ground, would take momentum from the pair that the body never
+//! gets): the next contact pass (the next substep's, or the one that ends the step) hands it to
+//! the body. A jelly squashed under a crate thus holds the crate up with its volume too.
+//!
 //! Friction against a static collider holds a particle where it stands, not only its velocity
 //! (see `static_friction`): with velocity-only friction the volume impulses' small pushes at
 //! a resting body's base, each stopped by friction only while it pressed into the ground, made
@@ -20,10 +29,13 @@
 //! sphere, friction is Coulomb's on the relative velocity.
 
 use glam::Vec3;
+use parry3d::bounding_volume::Aabb;
 
 use super::body::SoftBodyState;
 use super::chunks::in_particle_chunks;
-use super::colliders::{ColliderInstance, RigidSphereState, combined_friction, friction_change};
+use super::colliders::{
+    ColliderInstance, RigidContacts, RigidSphereState, combined_friction, friction_change,
+};
 use super::parallel::{Parallel, Serial, SharedSlice};
 
 /// Fastest speed, in m/s, at which a particle already inside a sphere is pushed out of it.
@@ -81,6 +93,7 @@ impl SoftBodyState {
             return 0;
         }
         let friction = self.material.friction;
+        let filter = self.collision_filter;
         let n = self.positions.len();
         let (positions, inv_masses) = (&self.positions[..], &self.inv_masses[..]);
         // SAFETY: each job reads and writes only its own chunk's particles.
@@ -100,6 +113,9 @@ impl SoftBodyState {
                     }
                     let mut touched = false;
                     for c in colliders {
+                        if !filter.interacts_with(c.filter) {
+                            continue;
+                        }
                         let x = positions[i];
                         let xp = x + h * velocities.get(i);
                         let Some((depth, normal)) = c.penetration(xp) else {
@@ -187,14 +203,91 @@ impl SoftBodyState {
     }
 }
 
+impl SoftBodyState {
+    /// The rigid bodies this body meets in its next step (see [`RigidContacts`]): set them
+    /// before the step, read their changed velocities after it.
+    pub fn rigid_contacts_mut(&mut self) -> &mut RigidContacts {
+        &mut self.rigid
+    }
+
+    /// The rigid bodies this body meets, with the velocities its contacts left them.
+    pub fn rigid_contacts(&self) -> &RigidContacts {
+        &self.rigid
+    }
+
+    /// Pushes predicted positions out of the rigid bodies' colliders where they are `elapsed`
+    /// seconds into the step (a substep's start) plus `h`, pushing the bodies back. Returns the
+    /// number of contacts.
+    pub(crate) fn resolve_rigid_contacts(&mut self, h: f32, elapsed: f32) -> u32 {
+        if self.rigid.colliders.is_empty() {
+            return 0;
+        }
+        let mut rigid = std::mem::take(&mut self.rigid);
+        let friction = self.material.friction;
+        let filter = self.collision_filter;
+        let mut contacts = 0;
+        for c in &rigid.colliders {
+            if !filter.interacts_with(c.filter) {
+                continue;
+            }
+            let body = &mut rigid.bodies[c.body as usize];
+            let (pose, centre) = body.advance(&c.pose, elapsed + h);
+            let bounds: Aabb = c.shape.compute_aabb(&pose);
+            let mu = combined_friction(friction, c.friction);
+            for i in 0..self.positions.len() {
+                let w = self.inv_masses[i];
+                if w == 0.0 {
+                    continue;
+                }
+                let xp = self.positions[i] + h * self.velocities[i];
+                if !bounds.contains_local_point(xp) {
+                    continue;
+                }
+                let projection = c.shape.project_point(&pose, xp, false);
+                if !projection.is_inside {
+                    continue;
+                }
+                let push = projection.point - xp;
+                let depth = push.length();
+                if depth <= 0.0 {
+                    continue;
+                }
+                let n = push / depth;
+                let r = projection.point - centre;
+                // The normal impulse that takes the predicted particle to the surface.
+                let lambda = depth / h / (w + body.inv_mass_along(r, n));
+                self.velocities[i] += n * (lambda * w);
+                body.apply_impulse(-n * lambda, r);
+                // Coulomb friction on the relative velocity at the contact point.
+                let relative = self.velocities[i] - body.velocity_at(r);
+                let slip = relative - n * relative.dot(n);
+                let slip_speed = slip.length();
+                if slip_speed > 0.0 {
+                    let t = slip / slip_speed;
+                    let jt = (slip_speed / (w + body.inv_mass_along(r, t))).min(mu * lambda);
+                    self.velocities[i] -= t * (jt * w);
+                    body.apply_impulse(t * jt, r);
+                }
+                // The volume passes keep the whole of a push into the body: the next contact
+                // pass hands it to the body, so momentum stays conserved.
+                self.record_contact(i, n, 1.0, None);
+                contacts += 1;
+            }
+        }
+        self.rigid = rigid;
+        contacts
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::colliders::{CollisionFilter, RigidBodyMotion, RigidCollider};
     use crate::core::material::SoftBodyMaterial;
     use crate::core::parallel::Threads;
-    use glam::{Quat, UVec3};
+    use glam::{Mat3, Quat, UVec3};
     use parry3d::math::Pose;
-    use parry3d::shape::{Ball, SharedShape};
+    use parry3d::shape::{Ball, Cuboid, SharedShape};
 
     /// A rubber cube (1 MPa, 0.5 m) and a jelly cube resting on the ground at 60 Hz stay where
     /// they are: with velocity-only friction the rubber cube crept along, pushed by its own
@@ -332,5 +425,84 @@ mod tests {
             }
         }
         assert!(inside > 500, "{inside} points inside");
+    }
+
+    /// The momentum of a soft body and a rigid crate (linear, and angular about the origin)
+    /// before and after one contact pass with an off-centre, tilted, spinning crate pressed into
+    /// the body: the pass only moves momentum between them. The angular part is kept up to the
+    /// distance between a particle and its contact point times the impulse (the impulse acts on
+    /// the particle where it is, on the crate at its surface).
+    #[test]
+    fn contacts_with_a_rigid_body_conserve_momentum() {
+        let mesh = crate::core::box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO).unwrap();
+        let mut body = SoftBodyState::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
+        body.velocities_mut().fill(Vec3::new(0.1, 0.5, 0.0));
+        let half = Vec3::new(0.2, 0.1, 0.15);
+        let mass = 3.0;
+        let inertia = Vec3::new(
+            half.y * half.y + half.z * half.z,
+            half.x * half.x + half.z * half.z,
+            half.x * half.x + half.y * half.y,
+        ) * (mass / 3.0);
+        let rotation = Quat::from_rotation_z(0.3) * Quat::from_rotation_x(0.2);
+        let rot = Mat3::from_quat(rotation);
+        let centre = Vec3::new(0.3, 0.45, 0.2);
+        let crate_motion = RigidBodyMotion {
+            centre_of_mass: centre,
+            linear_velocity: Vec3::new(0.0, -2.0, 0.3),
+            angular_velocity: Vec3::new(1.0, 0.0, -2.0),
+            inv_mass: 1.0 / mass,
+            inv_inertia: rot * Mat3::from_diagonal(inertia.recip()) * rot.transpose(),
+            gravity: Vec3::ZERO,
+        };
+        let rigid = body.rigid_contacts_mut();
+        rigid.bodies.push(crate_motion);
+        rigid.colliders.push(RigidCollider {
+            body: 0,
+            shape: SharedShape::new(Cuboid::new(half)),
+            pose: Pose::from_parts(centre, rotation),
+            friction: 0.6,
+            filter: CollisionFilter::ALL,
+        });
+        let momentum = |body: &SoftBodyState| {
+            let motion = body.rigid_contacts().bodies[0];
+            let inertia_world = motion.inv_inertia.inverse();
+            let mut linear = motion.linear_velocity * mass;
+            let mut angular = inertia_world * motion.angular_velocity
+                + motion.centre_of_mass.cross(motion.linear_velocity * mass);
+            for ((&x, &v), &m) in body
+                .positions()
+                .iter()
+                .zip(body.velocities())
+                .zip(body.masses())
+            {
+                linear += m * v;
+                angular += x.cross(m * v);
+            }
+            (linear, angular)
+        };
+        let (linear0, angular0) = momentum(&body);
+        let h = 0.01;
+        let contacts = body.resolve_rigid_contacts(h, 0.0);
+        assert!(contacts > 5, "{contacts} contacts");
+        let (linear1, angular1) = momentum(&body);
+        let motion = body.rigid_contacts().bodies[0];
+        let transferred = (motion.linear_velocity - crate_motion.linear_velocity).length() * mass;
+        assert!(
+            transferred > 0.5,
+            "the crate was slowed by {transferred} N s"
+        );
+        assert!(
+            (linear1 - linear0).length() < 1e-4 * transferred,
+            "linear momentum {linear0} -> {linear1}"
+        );
+        let turned = (motion.angular_velocity - crate_motion.angular_velocity).length();
+        assert!(turned > 0.1, "the crate's spin changed by {turned} rad/s");
+        // Particle-to-contact distance: at most the depth plus the particle's motion in h.
+        let lever = 0.1 + h * 2.5;
+        assert!(
+            (angular1 - angular0).length() < lever * transferred,
+            "angular momentum {angular0} -> {angular1}"
+        );
     }
 }

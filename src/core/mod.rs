@@ -29,7 +29,10 @@ pub(crate) mod winding;
 pub(crate) mod xpbd;
 
 pub use body::{ParticleIndexError, SoftBodyState, VolumeMetrics};
-pub use colliders::{ColliderInstance, RigidSphereState};
+pub use colliders::{
+    ColliderInstance, CollisionFilter, RigidBodyMotion, RigidCollider, RigidContacts,
+    RigidSphereState,
+};
 pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::{ImpulseOutcome, StepCounters};

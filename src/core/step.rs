@@ -107,8 +107,8 @@ impl SoftBodyState {
         }
     }
 
-    /// The particles against the spheres, then against the static colliders (last, so that no
-    /// particle is left inside the ground by a sphere pushing it). A body solved in substeps
+    /// The particles against the spheres, the rigid bodies of another engine, then the static
+    /// colliders (last, so that no particle is left inside the ground by a body pushing it). A body solved in substeps
     /// meets them in its substeps instead.
     fn resolve_contacts_on(
         &mut self,
@@ -121,6 +121,7 @@ impl SoftBodyState {
             return 0;
         }
         self.resolve_sphere_contacts(h, spheres)
+            + self.resolve_rigid_contacts(h, 0.0)
             + self.resolve_static_contacts_on(h, colliders, parallel)
     }
 

@@ -102,6 +102,7 @@ impl SoftBodyState {
         let meets = |x: Vec3, v: Vec3| {
             let end = x + h * v;
             colliders.iter().any(|c| c.penetration(end).is_some())
+                || self.rigid.meets(end, h)
                 || spheres.iter().any(|s| {
                     (end - (s.position + h * s.velocity)).length_squared()
                         < (s.radius + h * (v - s.velocity).length()).powi(2)
@@ -147,7 +148,14 @@ impl SoftBodyState {
         if tet_compliance.is_some() {
             refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
         }
+        // The rigid bodies of another engine get their gravity per substep too.
+        for body in &mut self.rigid.bodies {
+            body.linear_velocity -= h * body.gravity;
+        }
         for k in 0..substeps {
+            for body in &mut self.rigid.bodies {
+                body.linear_velocity += hs * body.gravity;
+            }
             // Predict; `predicted` holds where each particle started the substep.
             for i in 0..self.positions.len() {
                 if self.inv_masses[i] > 0.0 {
@@ -191,6 +199,7 @@ impl SoftBodyState {
             for (s, &start) in spheres.iter_mut().zip(&self.scratch.sphere_positions) {
                 s.position = start;
             }
+            contacts += self.resolve_rigid_contacts(hs, k as f32 * hs);
             contacts += self.resolve_static_contacts(hs, colliders);
             if dampers {
                 self.damp_springs(hs);

@@ -15,13 +15,16 @@ use crate::components::{
     SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
 use crate::core::step::{Stage, spheres_after_bodies, spheres_before_bodies};
-use crate::core::{ColliderInstance, Parallel, RigidSphereState, Serial, SoftBodyState, TetMesh};
+use crate::core::{
+    ColliderInstance, Parallel, RigidBodyMotion, RigidSphereState, Serial, SoftBodyState, TetMesh,
+};
 
 mod systems;
 mod threads;
 mod timing;
 
 pub use systems::SolverSpheres;
+pub(crate) use systems::gather_spheres;
 use systems::*;
 #[cfg(test)]
 pub(crate) use threads::test_compute_pool;
@@ -115,12 +118,15 @@ pub struct SoftBodyTiming {
     /// Whether the steps run in [`FixedUpdate`], so that frames fall between steps and are
     /// drawn interpolated.
     pub fixed: bool,
+    /// The schedule the steps run in.
+    pub schedule: InternedScheduleLabel,
 }
 
 impl Plugin for SoftBodyPlugin {
     fn build(&self, app: &mut App) {
         app.insert_resource(SoftBodyTiming {
             fixed: self.schedule == FixedUpdate.intern(),
+            schedule: self.schedule,
         });
         app.init_resource::<SoftBodyGravity>()
             .register_type::<SoftBodyGravity>()

@@ -146,7 +146,13 @@ pub struct SolverSpheres {
     pub(super) states: Vec<RigidSphereState>,
     /// The spheres as they were before the stage running now (see [`par_with_spheres`]).
     pub(super) before: Vec<RigidSphereState>,
-    pub(super) colliders: Vec<ColliderInstance>,
+    pub(crate) colliders: Vec<ColliderInstance>,
+    /// Rigid bodies another engine simulates (avian's, with the `avian` feature): their motion
+    /// as the contacts change it during the step; a soft body's `RigidContacts` holds copies of
+    /// those near it (`SoftBody::rigid_ids`).
+    pub(crate) rigid: Vec<RigidBodyMotion>,
+    /// The rigid bodies as they were before the stage running now.
+    pub(super) rigid_before: Vec<RigidBodyMotion>,
     /// The bodies' entities, in query order (scratch of [`for_each_body`]).
     pub(super) bodies: Vec<Entity>,
 }
@@ -167,7 +173,7 @@ pub(super) fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> Rigid
 }
 
 /// Gathers the rigid spheres and static colliders as the solver sees them during the step.
-pub(super) fn gather_spheres(
+pub(crate) fn gather_spheres(
     mut solver: ResMut<SolverSpheres>,
     spheres: Query<(Entity, &RigidSphere, &Transform)>,
     colliders: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,

@@ -163,16 +163,33 @@ pub(super) fn par_with_spheres(
 ) {
     solver.before.clear();
     solver.before.extend_from_slice(&solver.states);
+    solver.rigid_before.clear();
+    solver.rigid_before.extend_from_slice(&solver.rigid);
     let (before, colliders) = (&solver.before, &solver.colliders);
+    let rigid_before = &solver.rigid_before;
     let run = |(mut body, mut stats): (Mut<SoftBody>, Mut<SoftBodyStats>)| {
         let body = &mut *body;
         let start = Instant::now();
         body.spheres.clear();
         body.spheres.extend_from_slice(before);
+        let rigid = body.state.rigid_contacts_mut();
+        for (mine, &id) in rigid.bodies.iter_mut().zip(&body.rigid_ids) {
+            *mine = rigid_before[id as usize];
+        }
         pass(&mut body.state, &mut stats, &mut body.spheres, colliders);
         body.step_time += start.elapsed();
     };
     for_each_body(bodies, &mut solver.bodies, compute, run);
+    // The rigid bodies get every soft body's changes, as differences (they start from the
+    // same velocities), in query order.
+    for (_, body, _) in bodies.iter() {
+        let mine = &body.state.rigid_contacts().bodies;
+        for (motion, &id) in mine.iter().zip(&body.rigid_ids) {
+            let (all, old) = (&mut solver.rigid[id as usize], &rigid_before[id as usize]);
+            all.linear_velocity += motion.linear_velocity - old.linear_velocity;
+            all.angular_velocity += motion.angular_velocity - old.angular_velocity;
+        }
+    }
     if solver.states.is_empty() {
         return;
     }

@@ -1,0 +1,218 @@
+//! Soft bodies in an avian3d world: crates, capsules and jellies fall on a ramp and on each
+//! other. Grab a jelly with the left mouse button and drag it; T throws a crate from the
+//! camera; R starts again.
+
+mod common;
+
+use std::sync::Arc;
+
+use avian3d::prelude::*;
+use bevy::prelude::*;
+use bevy_soft_body::avian::SoftBodyAvianPlugin;
+use bevy_soft_body::core::{TetMesh, box_grid};
+use bevy_soft_body::prelude::*;
+use bevy_soft_body::surface_mesh;
+use common::{ExampleOptions, ExtraHelp, Grab, OrbitCamera, ResetScene, SceneMember, grab};
+
+fn main() -> AppExit {
+    let mut app = common::example_app_with(
+        "bevy_soft_body: avian playground",
+        None,
+        ExampleOptions::from_args(),
+    );
+    app.add_plugins((PhysicsPlugins::default(), SoftBodyAvianPlugin))
+        .init_resource::<Grab>()
+        .insert_resource(ExtraHelp(vec![
+            "left drag: grab and pull a jelly   T: throw a crate",
+        ]))
+        .add_systems(Startup, spawn_scene)
+        .add_systems(PostStartup, frame_scene)
+        .add_systems(Update, (throw_crate, grab, reset));
+    app.run()
+}
+
+/// A crate's colour.
+const WOOD: Color = Color::srgb(0.72, 0.52, 0.3);
+
+fn spawn_scene(
+    mut commands: Commands,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+) {
+    let grey = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.55, 0.57, 0.6),
+        perceptual_roughness: 0.8,
+        ..default()
+    });
+    // The ground and a ramp, avian's static colliders.
+    commands.spawn((
+        RigidBody::Static,
+        Collider::half_space(Vec3::Y),
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(12.0, 12.0))),
+        MeshMaterial3d(grey.clone()),
+        Transform::default(),
+        SceneMember,
+    ));
+    let ramp = Vec3::new(2.4, 0.15, 1.4);
+    commands.spawn((
+        RigidBody::Static,
+        Collider::cuboid(ramp.x, ramp.y, ramp.z),
+        Mesh3d(meshes.add(Cuboid::from_size(ramp))),
+        MeshMaterial3d(grey),
+        Transform::from_xyz(-1.6, 0.55, 0.0).with_rotation(Quat::from_rotation_z(-0.4)),
+        SceneMember,
+    ));
+    // Jellies: one at the top of the ramp, two on the ground with a crate dropped on each.
+    let jellies = [
+        (
+            "red jelly",
+            Vec3::new(-2.35, 1.15, -0.2),
+            Color::srgb(0.85, 0.25, 0.35),
+        ),
+        (
+            "green jelly",
+            Vec3::new(0.6, 0.0, -0.2),
+            Color::srgb(0.3, 0.75, 0.4),
+        ),
+        (
+            "blue jelly",
+            Vec3::new(1.6, 0.0, -0.2),
+            Color::srgb(0.35, 0.5, 0.9),
+        ),
+    ];
+    for (name, corner, colour) in jellies {
+        let jelly = spawn_jelly(&mut commands, &mut meshes, &mut materials, corner, colour);
+        commands.entity(jelly).insert(Name::new(name));
+    }
+    let wood = materials.add(StandardMaterial {
+        base_color: WOOD,
+        perceptual_roughness: 0.7,
+        ..default()
+    });
+    for (at, turn) in [
+        (Vec3::new(0.8, 0.9, 0.0), 0.3),
+        (Vec3::new(1.75, 1.4, -0.05), -0.6),
+    ] {
+        commands.spawn((
+            crate_bundle(&mut meshes, wood.clone()),
+            Transform::from_translation(at).with_rotation(Quat::from_rotation_y(turn)),
+        ));
+    }
+    // Capsules rolling down the ramp and onto the jellies.
+    let capsule = meshes.add(Capsule3d::new(0.08, 0.3));
+    let metal = materials.add(StandardMaterial {
+        base_color: Color::srgb(0.8, 0.8, 0.85),
+        metallic: 0.6,
+        perceptual_roughness: 0.3,
+        ..default()
+    });
+    for k in 0..3 {
+        commands.spawn((
+            RigidBody::Dynamic,
+            Collider::capsule(0.08, 0.3),
+            Mesh3d(capsule.clone()),
+            MeshMaterial3d(metal.clone()),
+            Transform::from_xyz(-2.2 + 0.25 * k as f32, 1.8 + 0.3 * k as f32, 0.35)
+                .with_rotation(Quat::from_rotation_x(std::f32::consts::FRAC_PI_2)),
+            SceneMember,
+        ));
+    }
+}
+
+/// A 0.36 m jelly cube of 6 cells a side with its lowest corner at `corner`, drawn with its tet
+/// mesh's boundary.
+fn spawn_jelly(
+    commands: &mut Commands,
+    meshes: &mut Assets<Mesh>,
+    materials: &mut Assets<StandardMaterial>,
+    corner: Vec3,
+    colour: Color,
+) -> Entity {
+    let mesh: Arc<TetMesh> = box_grid(UVec3::splat(6), Vec3::splat(0.06), Vec3::ZERO)
+        .expect("a 6-cell box is a valid mesh")
+        .into();
+    let surface = mesh.boundary_surface();
+    let body = SoftBody::new(mesh, SoftBodyMaterial::JELLY).expect("the jelly preset is valid");
+    let entity = commands
+        .spawn((body, Transform::from_translation(corner), SceneMember))
+        .id();
+    commands.entity(entity).insert((
+        SoftBodySurface::new(entity),
+        Mesh3d(meshes.add(surface_mesh(&surface))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color: colour,
+            perceptual_roughness: 0.35,
+            reflectance: 0.4,
+            ..default()
+        })),
+    ));
+    entity
+}
+
+/// A 0.3 m, 8 kg crate (transform to be added).
+fn crate_bundle(meshes: &mut Assets<Mesh>, material: Handle<StandardMaterial>) -> impl Bundle {
+    (
+        RigidBody::Dynamic,
+        Collider::cuboid(0.3, 0.3, 0.3),
+        Mass(8.0),
+        Mesh3d(meshes.add(Cuboid::from_length(0.3))),
+        MeshMaterial3d(material),
+        SceneMember,
+    )
+}
+
+fn frame_scene(mut camera: Query<(&mut OrbitCamera, &mut Transform)>) {
+    if let Ok((mut orbit, mut transform)) = camera.single_mut() {
+        orbit.focus = Vec3::new(0.0, 0.5, 0.0);
+        orbit.distance = 5.5;
+        orbit.pitch = 0.35;
+        orbit.yaw = 0.2;
+        *transform = orbit.transform();
+    }
+}
+
+fn throw_crate(
+    keys: Res<ButtonInput<KeyCode>>,
+    camera: Query<&Transform, With<Camera3d>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut commands: Commands,
+) {
+    if !keys.just_pressed(KeyCode::KeyT) {
+        return;
+    }
+    let Ok(eye) = camera.single() else {
+        return;
+    };
+    let wood = materials.add(StandardMaterial {
+        base_color: WOOD,
+        ..default()
+    });
+    commands.spawn((
+        crate_bundle(&mut meshes, wood),
+        Transform::from_translation(eye.translation + eye.forward() * 0.8),
+        LinearVelocity(eye.forward() * 7.0),
+        AngularVelocity(Vec3::new(1.0, 2.0, 0.5)),
+    ));
+}
+
+/// R (or the common reset) spawns the scene anew.
+fn reset(
+    keys: Res<ButtonInput<KeyCode>>,
+    mut reset: ResMut<ResetScene>,
+    members: Query<Entity, With<SceneMember>>,
+    mut grab: ResMut<Grab>,
+    mut commands: Commands,
+    meshes: ResMut<Assets<Mesh>>,
+    materials: ResMut<Assets<StandardMaterial>>,
+) {
+    if !(keys.just_pressed(KeyCode::KeyR) || reset.0) {
+        return;
+    }
+    reset.0 = false;
+    grab.0 = None;
+    for entity in &members {
+        commands.entity(entity).despawn();
+    }
+    spawn_scene(commands, meshes, materials);
+}

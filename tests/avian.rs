@@ -1,0 +1,241 @@
+//! Soft bodies among avian3d's rigid bodies (feature `avian`), headless: `MinimalPlugins`,
+//! avian's `PhysicsPlugins` and the soft-body plugins, stepped at a manual 10 ms.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use avian3d::prelude::*;
+use bevy::prelude::*;
+use bevy::time::TimeUpdateStrategy;
+use bevy_soft_body::avian::SoftBodyAvianPlugin;
+use bevy_soft_body::core::{TetMesh, box_grid};
+use bevy_soft_body::prelude::*;
+use glam::{Mat3, UVec3};
+
+fn app(gravity: Vec3, max_threads: usize) -> App {
+    let mut app = App::new();
+    app.add_plugins((
+        MinimalPlugins,
+        TransformPlugin,
+        PhysicsPlugins::default(),
+        SoftBodyPlugin::default(),
+        SoftBodyAvianPlugin,
+    ))
+    .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(
+        10,
+    )))
+    .insert_resource(Gravity(gravity))
+    .insert_resource(SoftBodyThreads { max_threads });
+    // Avian sets some of its resources up in `finish`, which `App::run` calls.
+    app.finish();
+    app.cleanup();
+    app.update();
+    app
+}
+
+/// A jelly cube of `side` metres in 6 cells a side, its lowest corner at `corner`.
+fn jelly(side: f32, corner: Vec3) -> SoftBody {
+    let mesh: Arc<TetMesh> = box_grid(UVec3::splat(6), Vec3::splat(side / 6.0), Vec3::ZERO)
+        .unwrap()
+        .into();
+    let mut body = SoftBody::new(mesh, SoftBodyMaterial::JELLY).unwrap();
+    body.state_mut().translate(corner);
+    body
+}
+
+/// A dynamic crate of half extents `half` and mass `mass` at `at`.
+fn crate_body(half: Vec3, mass: f32, at: Vec3) -> impl Bundle {
+    (
+        RigidBody::Dynamic,
+        Collider::cuboid(2.0 * half.x, 2.0 * half.y, 2.0 * half.z),
+        Mass(mass),
+        Transform::from_translation(at),
+    )
+}
+
+/// Linear momentum, and angular momentum about the origin, of every soft body and avian body.
+fn momentum(app: &mut App) -> (Vec3, Vec3) {
+    let (mut linear, mut angular) = (Vec3::ZERO, Vec3::ZERO);
+    let world = app.world_mut();
+    for body in world.query::<&SoftBody>().iter(world) {
+        let s = body.state();
+        for ((&x, &v), &m) in s.positions().iter().zip(s.velocities()).zip(s.masses()) {
+            linear += m * v;
+            angular += x.cross(m * v);
+        }
+    }
+    for (position, rotation, v, w, mass, inertia, com) in world
+        .query::<(
+            &Position,
+            &Rotation,
+            &LinearVelocity,
+            &AngularVelocity,
+            &ComputedMass,
+            &ComputedAngularInertia,
+            &ComputedCenterOfMass,
+        )>()
+        .iter(world)
+    {
+        let p = mass.value() * v.0;
+        let turn = Mat3::from_quat(rotation.0);
+        let inertia = turn * inertia.inverse().to_mat3().inverse() * turn.transpose();
+        linear += p;
+        angular += inertia * w.0 + (position.0 + rotation.0 * com.0).cross(p);
+    }
+    (linear, angular)
+}
+
+/// A spinning crate thrown off-centre at a jelly floating in space: the jelly dents and is
+/// pushed and turned, the crate is slowed and turned, and the momentum of the two, linear and
+/// angular, is what it was. Tolerances: linear momentum within 0.5 % of what the crate carried
+/// in; angular within 3 % of the crate's (a contact's impulse acts on the particle where it is
+/// and on the crate at its surface, a lever of up to a particle's depth in the crate).
+#[test]
+fn a_soft_rigid_impact_conserves_momentum() {
+    let mut app = app(Vec3::ZERO, usize::MAX);
+    let soft = app.world_mut().spawn(jelly(0.3, Vec3::ZERO)).id();
+    let half = Vec3::new(0.1, 0.06, 0.08);
+    let rigid = app
+        .world_mut()
+        .spawn((
+            crate_body(half, 4.0, Vec3::new(0.22, 0.45, 0.12)),
+            LinearVelocity(Vec3::new(0.2, -3.0, 0.1)),
+            AngularVelocity(Vec3::new(2.0, 0.5, -3.0)),
+        ))
+        .id();
+    app.update();
+    let (linear0, angular0) = momentum(&mut app);
+    let crate_p0 = 4.0 * 3.0f32.hypot(0.2);
+    for _ in 0..40 {
+        app.update();
+    }
+    let (linear1, angular1) = momentum(&mut app);
+    let v = app.world().get::<LinearVelocity>(rigid).unwrap().0;
+    assert!(v.y > -2.0, "the crate was not slowed: {v}");
+    let soft_v = {
+        let s = app.world().get::<SoftBody>(soft).unwrap().state();
+        s.velocities().iter().sum::<Vec3>() / s.velocities().len() as f32
+    };
+    assert!(soft_v.y < -0.3, "the jelly was not pushed: {soft_v}");
+    assert!(
+        (linear1 - linear0).length() < 5e-3 * crate_p0,
+        "linear momentum {linear0} -> {linear1}"
+    );
+    assert!(
+        (angular1 - angular0).length() < 0.03 * angular0.length().max(crate_p0 * 0.3),
+        "angular momentum {angular0} -> {angular1}"
+    );
+    println!(
+        "linear momentum {linear0} -> {linear1}, angular {angular0} -> {angular1}, crate's {crate_p0}"
+    );
+}
+
+/// How deep `x` is inside the box of half extents `half` at `position`, `rotation` (zero
+/// outside).
+fn depth_inside_box(x: Vec3, half: Vec3, position: Vec3, rotation: Quat) -> f32 {
+    let local = rotation.inverse() * (x - position);
+    (half - local.abs()).min_element().max(0.0)
+}
+
+/// A 2 kg crate dropped on a jelly on avian's ground comes to rest on it within 5 s: over the
+/// last second it moves less than 2 mm and turns less than a degree (its velocity within a
+/// step is not zero: each step it presses the jelly's top down by about `g h^2 / 2` and the
+/// jelly pushes it back), held up by the jelly, with no particle inside it, and the jelly
+/// keeps its volume under it.
+#[test]
+fn a_crate_comes_to_rest_on_a_jelly() {
+    let mut app = app(Vec3::new(0.0, -9.81, 0.0), usize::MAX);
+    app.world_mut().spawn((
+        RigidBody::Static,
+        Collider::half_space(Vec3::Y),
+        Transform::default(),
+    ));
+    let soft = app
+        .world_mut()
+        .spawn(jelly(0.3, Vec3::new(-0.15, 0.0, -0.15)))
+        .id();
+    let half = Vec3::new(0.1, 0.05, 0.1);
+    let rigid = app
+        .world_mut()
+        .spawn(crate_body(half, 2.0, Vec3::new(0.02, 0.45, -0.01)))
+        .id();
+    let pose = |app: &App| {
+        let world = app.world();
+        (
+            world.get::<Position>(rigid).unwrap().0,
+            world.get::<Rotation>(rigid).unwrap().0,
+        )
+    };
+    for _ in 0..400 {
+        app.update();
+    }
+    let (position4, rotation4) = pose(&app);
+    let mut max_inside = 0.0f32;
+    for _ in 0..100 {
+        app.update();
+        let (position, rotation) = pose(&app);
+        let body = app.world().get::<SoftBody>(soft).unwrap().state();
+        for &x in body.positions() {
+            max_inside = max_inside.max(depth_inside_box(x, half, position, rotation));
+        }
+    }
+    let (position, rotation) = pose(&app);
+    let moved = position.distance(position4);
+    let turned = rotation.angle_between(rotation4).to_degrees();
+    assert!(
+        moved < 2e-3 && turned < 1.0,
+        "moved {moved} m, turned {turned} deg"
+    );
+    // Resting on the jelly (its top is at 0.3 m, pressed down a little), not on the ground.
+    assert!(
+        position.y > 0.25 + half.y && position.y < 0.31 + half.y,
+        "crate at {position}"
+    );
+    assert!(
+        max_inside < 2e-3,
+        "a particle {max_inside} m inside the crate"
+    );
+    let body = app.world().get::<SoftBody>(soft).unwrap().state();
+    let error = body.volume_metrics().volume_error_pct;
+    assert!(error.abs() < 1.0, "volume error {error} %");
+    println!(
+        "moved {moved} m, turned {turned} deg, deepest particle {max_inside} m, volume {error} %"
+    );
+}
+
+/// The same scene on one thread and on every thread of the pool ends in the same state, bit for
+/// bit: two jellies under one crate, so that both push it in the same stages.
+#[test]
+fn results_do_not_depend_on_the_threads() {
+    let run = |max_threads| {
+        let mut app = app(Vec3::new(0.0, -9.81, 0.0), max_threads);
+        app.world_mut().spawn((
+            RigidBody::Static,
+            Collider::half_space(Vec3::Y),
+            Transform::default(),
+        ));
+        for x in [-0.32, 0.02] {
+            app.world_mut().spawn(jelly(0.3, Vec3::new(x, 0.0, -0.15)));
+        }
+        let rigid = app
+            .world_mut()
+            .spawn(crate_body(
+                Vec3::new(0.3, 0.05, 0.1),
+                3.0,
+                Vec3::new(0.0, 0.4, 0.0),
+            ))
+            .id();
+        for _ in 0..60 {
+            app.update();
+        }
+        let world = app.world_mut();
+        let mut positions: Vec<Vec3> = Vec::new();
+        for body in world.query::<&SoftBody>().iter(world) {
+            positions.extend_from_slice(body.state().positions());
+        }
+        (positions, world.get::<Position>(rigid).unwrap().0)
+    };
+    let one = run(1);
+    assert!(one.1.y < 0.39, "the crate fell onto the jellies: {}", one.1);
+    assert_eq!(run(usize::MAX), one);
+}
