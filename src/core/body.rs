@@ -6,6 +6,7 @@ use std::sync::Arc;
 
 use glam::Vec3;
 
+use super::boundary::{Boundary, SoftContactSettings};
 use super::chunks::{ChunkFindings, in_particle_chunks};
 use super::colliders::{ColliderInstance, CollisionFilter, RigidContacts, RigidSphereState};
 use super::deviatoric::{ShapeBundle, shape_bundles};
@@ -17,6 +18,7 @@ use super::parallel::{BlockFlags, Parallel, Serial, SharedSlice};
 use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
 use super::sleep::{Sleep, SleepSettings};
 use super::tet_mesh::TetMesh;
+use super::xpbd::SubstepPlan;
 
 /// A particle index that does not exist in the body's mesh.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -105,6 +107,10 @@ pub struct SoftBodyState {
     pub(crate) collision_filter: CollisionFilter,
     /// The rigid bodies of another engine it may touch this step (`contacts.rs`).
     pub(crate) rigid: RigidContacts,
+    /// How it meets other soft bodies (`soft_contacts.rs`); `None`: it passes through them.
+    pub(crate) soft_contacts: Option<SoftContactSettings>,
+    /// Its boundary triangles and particles, for soft contacts.
+    pub(crate) boundary: Boundary,
     /// A step's working memory and the caches that only save it work (see [`StepScratch`]).
     pub(crate) scratch: StepScratch,
 }
@@ -146,6 +152,10 @@ pub(crate) struct StepScratch {
     pub(crate) ring_corrected: Vec<bool>,
     /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
     pub(crate) shape_bundles: Vec<ShapeBundle>,
+    /// This step's substeps while they run in lockstep with other bodies' (`soft_contacts.rs`).
+    pub(crate) substep_plan: Option<SubstepPlan>,
+    /// The particles the last soft-contact pass touched and their normals (`soft_contacts.rs`).
+    pub(crate) soft_touched: Vec<(u32, Vec3)>,
 }
 
 impl SoftBodyState {
@@ -184,6 +194,8 @@ impl SoftBodyState {
             sleep: Sleep::new(Some(Default::default()), n),
             collision_filter: CollisionFilter::ALL,
             rigid: RigidContacts::default(),
+            soft_contacts: Some(SoftContactSettings::for_edge(shortest_edge)),
+            boundary: Boundary::of(&mesh),
             runaway_limits: Default::default(),
             runaway: None,
             sane_centre: None,
@@ -203,6 +215,8 @@ impl SoftBodyState {
                 sphere_positions: Vec::new(),
                 chunk_findings: ChunkFindings::for_particles(n),
                 ring_corrected: vec![false; n],
+                substep_plan: None,
+                soft_touched: Vec::new(),
                 substep_velocities: vec![Vec3::ZERO; n],
                 shape_bundles: shape_bundles(&mesh),
             },

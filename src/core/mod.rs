@@ -3,6 +3,7 @@
 
 pub(crate) mod blocks;
 pub(crate) mod body;
+pub(crate) mod boundary;
 pub(crate) mod chunks;
 pub(crate) mod colliders;
 pub(crate) mod contacts;
@@ -20,6 +21,7 @@ pub(crate) mod reference;
 pub(crate) mod roots;
 pub(crate) mod runaway;
 pub(crate) mod sleep;
+pub(crate) mod soft_contacts;
 pub(crate) mod step;
 pub(crate) mod surface_mesh;
 pub(crate) mod tet_mesh;
@@ -29,6 +31,7 @@ pub(crate) mod winding;
 pub(crate) mod xpbd;
 
 pub use body::{ParticleIndexError, SoftBodyState, VolumeMetrics};
+pub use boundary::{Boundary, SoftContactSettings};
 pub use colliders::{
     ColliderInstance, CollisionFilter, RigidBodyMotion, RigidCollider, RigidContacts,
     RigidSphereState,
@@ -44,6 +47,10 @@ pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
 pub use runaway::{Runaway, RunawayLimits};
 pub use sleep::SleepSettings;
+pub use soft_contacts::{
+    SoftContactPhase, prepare_soft_pass, resolve_pair, resolve_self, shape_pass_together,
+    soft_contact_pass, step_bodies,
+};
 pub use step::Stage;
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
 pub use tet_mesh::{Blocks, TetMesh, TetMeshError};

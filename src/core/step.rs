@@ -125,6 +125,18 @@ impl SoftBodyState {
             + self.resolve_static_contacts_on(h, colliders, parallel)
     }
 
+    /// The contact stage's part for a body not solved in substeps (a substepped body meets
+    /// its contacts in its substeps): what [`Stage::Contacts`] does besides `shape_pass`.
+    pub fn resolve_contacts_outside_substeps(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) -> u32 {
+        self.resolve_contacts_on(h, spheres, colliders, parallel)
+    }
+
     /// A whole step without colliders or spheres: for tests and benchmarks of the core.
     pub fn step_free(&mut self, h: f32, gravity: Vec3) {
         self.step_with_contacts(h, gravity, &mut [], &[]);

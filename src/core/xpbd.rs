@@ -36,6 +36,23 @@ use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};
 use super::parallel::Parallel;
 
+/// How a body's substeps run in one step (see [`SoftBodyState::plan_substeps`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct SubstepPlan {
+    /// How many.
+    pub(crate) substeps: u32,
+    /// Their length.
+    pub(crate) hs: f32,
+    /// XPBD: the tets' volumes are projected in the shape solve, no volume impulses.
+    volumes: bool,
+    /// The shape projection's damping term (physical materials).
+    shape_damping: f32,
+    /// Whether the paper's spring dampers act on the velocities.
+    dampers: bool,
+    /// The tets' shape compliances, for a physical material under the impulses.
+    tet_compliance: Option<[f32; 2]>,
+}
+
 impl SoftBodyState {
     /// The step in substeps (see [`SoftBodyMaterial::is_substepped`]); nothing for a body
     /// integrated explicitly in one step. Returns the contacts it resolved (summed over the
@@ -52,6 +69,10 @@ impl SoftBodyState {
     /// in every substep, not once a step: a body crushed within a step by a landing cannot be
     /// restored after it.
     ///
+    /// Bodies that touch each other run their substeps in lockstep instead
+    /// (`soft_contacts::shape_pass_together`), with [`SoftBodyState::plan_substeps`] and the
+    /// three parts of a substep below.
+    ///
     /// [`SoftBodyMaterial::is_substepped`]: super::material::SoftBodyMaterial::is_substepped
     /// [`VolumeMethod::Xpbd`]: super::material::VolumeMethod::Xpbd
     pub fn shape_pass(
@@ -61,20 +82,81 @@ impl SoftBodyState {
         colliders: &[ColliderInstance],
         parallel: &dyn Parallel,
     ) -> u32 {
-        if !self.material.is_substepped() || self.stays_asleep(h, spheres, colliders) {
+        let Some(plan) = self.plan_substeps(h, spheres, colliders, None) else {
             return 0;
-        }
-        let substeps = match (self.material.method, self.material.elasticity) {
-            (VolumeMethod::Xpbd(s), _) => s.substeps.max(1),
-            (VolumeMethod::Impulses(_), Elasticity::Elastic(e)) => {
-                let speed = self.substep_speed(h, spheres, colliders);
-                e.substeps(h, speed, self.shortest_edge)
-            }
-            _ => return 0,
         };
-        let contacts = self.substeps(h, substeps, spheres, colliders, parallel);
+        let mut contacts = 0;
+        for k in 0..plan.substeps {
+            self.substep_motion(&plan, k);
+            contacts += self.substep_contacts(&plan, k, spheres, colliders);
+            self.substep_finish(&plan, spheres, parallel);
+        }
         self.update_sleep(h, spheres, colliders);
         contacts
+    }
+
+    /// Sets up this step's substeps (`substeps` of them if given, else as many as the body's
+    /// motion needs); `None` for a body not solved in substeps, or asleep through the step.
+    pub(crate) fn plan_substeps(
+        &mut self,
+        h: f32,
+        spheres: &[RigidSphereState],
+        colliders: &[ColliderInstance],
+        substeps: Option<u32>,
+    ) -> Option<SubstepPlan> {
+        if !self.material.is_substepped() || self.stays_asleep(h, spheres, colliders) {
+            return None;
+        }
+        let substeps = match substeps {
+            Some(n) => n.max(1),
+            None => self.substeps_needed(h, spheres, colliders)?,
+        };
+        let volumes = self.material.method.is_xpbd();
+        let hs = h / substeps as f32;
+        // Stiffness-proportional damping in the shape projection (physical materials), or
+        // dampers on the velocities (the paper's springs).
+        let (shape_damping, dampers) = match self.material.elasticity {
+            Elasticity::Elastic(e) => (e.damping / hs, false),
+            Elasticity::Springs { .. } => (0.0, self.any_damping()),
+        };
+        // A physical material under the impulses keeps its shape per tet, unless its plastic
+        // springs are the edges (see `ElasticSettings`).
+        let tet_compliance = match (self.material.elasticity, self.material.plasticity) {
+            (Elasticity::Elastic(e), None) if !volumes => Some(e.tet_compliance()),
+            _ => None,
+        };
+        if tet_compliance.is_some() {
+            refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
+        }
+        // The rigid bodies of another engine get their gravity per substep too.
+        for body in &mut self.rigid.bodies {
+            body.linear_velocity -= h * body.gravity;
+        }
+        Some(SubstepPlan {
+            substeps,
+            hs,
+            volumes,
+            shape_damping,
+            dampers,
+            tet_compliance,
+        })
+    }
+
+    /// The substeps this step needs on its own; `None` for a body not solved in substeps.
+    pub(crate) fn substeps_needed(
+        &self,
+        h: f32,
+        spheres: &[RigidSphereState],
+        colliders: &[ColliderInstance],
+    ) -> Option<u32> {
+        match (self.material.method, self.material.elasticity) {
+            (VolumeMethod::Xpbd(s), _) => Some(s.substeps.max(1)),
+            (VolumeMethod::Impulses(_), Elasticity::Elastic(e)) => {
+                let speed = self.substep_speed(h, spheres, colliders);
+                Some(e.substeps(h, speed, self.shortest_edge))
+            }
+            _ => None,
+        }
     }
 
     /// The speed that sets a physical material's substeps (see
@@ -117,111 +199,103 @@ impl SoftBodyState {
         if approaching { absolute } else { relative }.sqrt()
     }
 
-    /// `substeps` substeps of a step of `h`: predict with gravity, project the edges (and, for
-    /// XPBD, the tets' volumes) once each, derive the velocities, meet the spheres and
-    /// colliders, damp, apply the paper's volume impulses (for that method), move.
-    fn substeps(
+    /// Substep `k`'s motion: gravity, the predicted positions, the shape solve (edges, or the
+    /// tets' shapes; for XPBD the tets' volumes too), and the velocities that motion gives,
+    /// with the particles back where the substep started.
+    pub(crate) fn substep_motion(&mut self, plan: &SubstepPlan, k: u32) {
+        let _ = k;
+        let hs = plan.hs;
+        let gravity = self.gravity;
+        for body in &mut self.rigid.bodies {
+            body.linear_velocity += hs * body.gravity;
+        }
+        // Predict; `predicted` holds where each particle started the substep.
+        for i in 0..self.positions.len() {
+            if self.inv_masses[i] > 0.0 {
+                self.velocities[i] += hs * gravity;
+            }
+            self.scratch.predicted[i] = Point4::new(self.positions[i]);
+            self.positions[i] += hs * self.velocities[i];
+        }
+        match plan.tet_compliance {
+            Some(compliance) => project_tet_shapes(
+                &self.scratch.shape_bundles,
+                &mut self.positions,
+                &self.scratch.predicted,
+                compliance,
+                hs * hs,
+                plan.shape_damping,
+            ),
+            None => self.project_edges(hs * hs, plan.shape_damping),
+        }
+        if plan.volumes {
+            self.project_volumes();
+        }
+        // Velocities from the motion, then contacts on them from the substep's start.
+        for i in 0..self.positions.len() {
+            let v = (self.positions[i] - self.scratch.predicted[i].vec3()) / hs;
+            if v.is_finite() {
+                self.velocities[i] = v;
+            } else {
+                self.velocities[i] = Vec3::ZERO;
+                self.counters.non_finite_velocities += 1;
+            }
+            self.positions[i] = self.scratch.predicted[i].vec3();
+        }
+    }
+
+    /// Substep `k`'s contacts with the spheres, rigid bodies and static colliders. Returns
+    /// the contacts.
+    pub(crate) fn substep_contacts(
         &mut self,
-        h: f32,
-        substeps: u32,
+        plan: &SubstepPlan,
+        k: u32,
         spheres: &mut [RigidSphereState],
         colliders: &[ColliderInstance],
-        parallel: &dyn Parallel,
     ) -> u32 {
-        let volumes = self.material.method.is_xpbd();
-        let mut contacts = 0;
-        let hs = h / substeps as f32;
-        let gravity = self.gravity;
-        let hs2 = hs * hs;
-        // Stiffness-proportional damping in the shape projection (physical materials), or
-        // dampers on the velocities (the paper's springs).
-        let (shape_damping, dampers) = match self.material.elasticity {
-            Elasticity::Elastic(e) => (e.damping / hs, false),
-            Elasticity::Springs { .. } => (0.0, self.any_damping()),
-        };
-        // A physical material under the impulses keeps its shape per tet, unless its plastic
-        // springs are the edges (see `ElasticSettings`).
-        let tet_compliance = match (self.material.elasticity, self.material.plasticity) {
-            (Elasticity::Elastic(e), None) if !volumes => Some(e.tet_compliance()),
-            _ => None,
-        };
-        if tet_compliance.is_some() {
-            refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
+        let hs = plan.hs;
+        // Each sphere where it is at this substep's start, then back exactly where it was.
+        self.scratch.sphere_positions.clear();
+        for s in spheres.iter_mut() {
+            self.scratch.sphere_positions.push(s.position);
+            s.position += (k as f32 * hs) * s.velocity;
         }
-        // The rigid bodies of another engine get their gravity per substep too.
-        for body in &mut self.rigid.bodies {
-            body.linear_velocity -= h * body.gravity;
+        let mut contacts = self.resolve_sphere_contacts(hs, spheres);
+        for (s, &start) in spheres.iter_mut().zip(&self.scratch.sphere_positions) {
+            s.position = start;
         }
-        for k in 0..substeps {
-            for body in &mut self.rigid.bodies {
-                body.linear_velocity += hs * body.gravity;
-            }
-            // Predict; `predicted` holds where each particle started the substep.
-            for i in 0..self.positions.len() {
-                if self.inv_masses[i] > 0.0 {
-                    self.velocities[i] += hs * gravity;
+        contacts += self.resolve_rigid_contacts(hs, k as f32 * hs);
+        contacts + self.resolve_static_contacts(hs, colliders)
+    }
+
+    /// The end of a substep: damping, then the paper's volume impulses and `x += h_s v` (or,
+    /// for XPBD, `x += h_s v` alone).
+    pub(crate) fn substep_finish(
+        &mut self,
+        plan: &SubstepPlan,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        let hs = plan.hs;
+        if plan.dampers {
+            self.damp_springs(hs);
+        }
+        let drag = self.material.linear_damping;
+        if drag > 0.0 {
+            let keep = 1.0 / (1.0 + hs * drag);
+            for (v, &w) in self.velocities.iter_mut().zip(&self.inv_masses) {
+                if w > 0.0 {
+                    *v *= keep;
                 }
-                self.scratch.predicted[i] = Point4::new(self.positions[i]);
-                self.positions[i] += hs * self.velocities[i];
-            }
-            match tet_compliance {
-                Some(compliance) => project_tet_shapes(
-                    &self.scratch.shape_bundles,
-                    &mut self.positions,
-                    &self.scratch.predicted,
-                    compliance,
-                    hs2,
-                    shape_damping,
-                ),
-                None => self.project_edges(hs2, shape_damping),
-            }
-            if volumes {
-                self.project_volumes();
-            }
-            // Velocities from the motion, then contacts on them from the substep's start.
-            for i in 0..self.positions.len() {
-                let v = (self.positions[i] - self.scratch.predicted[i].vec3()) / hs;
-                if v.is_finite() {
-                    self.velocities[i] = v;
-                } else {
-                    self.velocities[i] = Vec3::ZERO;
-                    self.counters.non_finite_velocities += 1;
-                }
-                self.positions[i] = self.scratch.predicted[i].vec3();
-            }
-            // Each sphere where it is at this substep's start, then back exactly where it was.
-            self.scratch.sphere_positions.clear();
-            for s in spheres.iter_mut() {
-                self.scratch.sphere_positions.push(s.position);
-                s.position += (k as f32 * hs) * s.velocity;
-            }
-            contacts += self.resolve_sphere_contacts(hs, spheres);
-            for (s, &start) in spheres.iter_mut().zip(&self.scratch.sphere_positions) {
-                s.position = start;
-            }
-            contacts += self.resolve_rigid_contacts(hs, k as f32 * hs);
-            contacts += self.resolve_static_contacts(hs, colliders);
-            if dampers {
-                self.damp_springs(hs);
-            }
-            let drag = self.material.linear_damping;
-            if drag > 0.0 {
-                let keep = 1.0 / (1.0 + hs * drag);
-                for (v, &w) in self.velocities.iter_mut().zip(&self.inv_masses) {
-                    if w > 0.0 {
-                        *v *= keep;
-                    }
-                }
-            }
-            if volumes {
-                for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
-                    *x += hs * *v;
-                }
-            } else {
-                self.volume_impulses_in_substep(hs, spheres, parallel);
             }
         }
-        contacts
+        if plan.volumes {
+            for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
+                *x += hs * *v;
+            }
+        } else {
+            self.volume_impulses_in_substep(hs, spheres, parallel);
+        }
     }
 
     /// The paper's one-ring and per-tet impulses in a substep of `hs`, on the predicted positions

@@ -1,0 +1,222 @@
+//! A soft body's boundary as other soft bodies meet it (`soft_contacts.rs`): its outward
+//! triangles and the particles on them, a uniform grid that hashes the triangles for a contact
+//! pass, and how the body meets others.
+
+use glam::{IVec3, Vec3};
+use parry3d::bounding_volume::Aabb;
+
+use super::tet_mesh::TetMesh;
+
+/// How a body meets other soft bodies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct SoftContactSettings {
+    /// The gap kept between a particle and another body's surface, in metres; the pair uses
+    /// the larger of the two bodies'.
+    pub thickness: f32,
+    /// Whether the body also meets itself (a long body that folds, a tail that touches).
+    pub self_contacts: bool,
+}
+
+impl SoftContactSettings {
+    /// The default for a mesh whose shortest rest edge is `shortest_edge`: a tenth of it, and
+    /// no self contacts.
+    pub fn for_edge(shortest_edge: f32) -> Self {
+        SoftContactSettings {
+            thickness: 0.1 * shortest_edge,
+            self_contacts: false,
+        }
+    }
+}
+
+/// A body's boundary: its outward triangles, the particles on them, and a grid of the
+/// triangles rebuilt in each pass. Built once from the mesh.
+#[derive(Clone, Debug, Default)]
+pub struct Boundary {
+    /// Outward boundary triangles (particle indices).
+    pub(crate) triangles: Vec<[u32; 3]>,
+    /// The particles on the boundary, in index order.
+    pub(crate) particles: Vec<u32>,
+    /// The longest boundary edge at rest: the grid's cell size, and how far two boundary
+    /// particles must be apart at rest to meet in a self contact.
+    pub(crate) longest_edge: f32,
+    /// The triangles hashed by cell for the current pass.
+    pub(crate) grid: TriangleGrid,
+    /// The bounds of the boundary particles over the current pass (`None`: the body takes no
+    /// part in it).
+    pub(crate) reach: Option<Aabb>,
+}
+
+impl Boundary {
+    /// The boundary of `mesh`.
+    pub fn of(mesh: &TetMesh) -> Self {
+        let indices = mesh.boundary_surface().indices;
+        let triangles: Vec<[u32; 3]> = indices
+            .chunks_exact(3)
+            .map(|t| [t[0], t[1], t[2]])
+            .collect();
+        let mut on = vec![false; mesh.vertex_count()];
+        let mut longest_edge = 0.0f32;
+        for t in &triangles {
+            for k in 0..3 {
+                on[t[k] as usize] = true;
+                let (a, b) = (t[k] as usize, t[(k + 1) % 3] as usize);
+                longest_edge = longest_edge.max(mesh.positions()[a].distance(mesh.positions()[b]));
+            }
+        }
+        let particles: Vec<u32> = (0..on.len() as u32).filter(|&i| on[i as usize]).collect();
+        let grid = TriangleGrid::with_capacity(triangles.len());
+        Boundary {
+            triangles,
+            particles,
+            longest_edge,
+            grid,
+            reach: None,
+        }
+    }
+
+    /// The boundary triangles, as indices of the body's particles.
+    pub fn triangles(&self) -> &[[u32; 3]] {
+        &self.triangles
+    }
+}
+
+/// Triangles hashed into the cells of a uniform grid they overlap, counting-sorted by bucket.
+#[derive(Clone, Debug, Default)]
+pub struct TriangleGrid {
+    cell: f32,
+    /// Bucket count minus one (a power of two minus one).
+    mask: u32,
+    /// For each bucket, where its triangles start in `items` (`mask + 2` entries).
+    starts: Vec<u32>,
+    /// Triangle indices by bucket.
+    items: Vec<u32>,
+    /// Scratch: (bucket, triangle) pairs before sorting.
+    pairs: Vec<(u32, u32)>,
+}
+
+impl TriangleGrid {
+    fn with_capacity(triangles: usize) -> Self {
+        TriangleGrid {
+            cell: 1.0,
+            mask: 0,
+            starts: Vec::with_capacity(16 * triangles + 1),
+            items: Vec::with_capacity(8 * triangles),
+            pairs: Vec::with_capacity(8 * triangles),
+        }
+    }
+
+    #[inline]
+    fn cell_of(&self, p: Vec3) -> IVec3 {
+        (p / self.cell).floor().as_ivec3()
+    }
+
+    #[inline]
+    fn hash(c: IVec3) -> u32 {
+        (c.x as u32).wrapping_mul(73_856_093)
+            ^ (c.y as u32).wrapping_mul(19_349_663)
+            ^ (c.z as u32).wrapping_mul(83_492_791)
+    }
+
+    #[inline]
+    fn bucket(&self, c: IVec3) -> u32 {
+        Self::hash(c) & self.mask
+    }
+
+    /// Hashes `bounds[t]` of every triangle `t` into cells of size `cell`.
+    pub(crate) fn build(&mut self, cell: f32, bounds: impl Iterator<Item = Aabb>) {
+        self.cell = cell.max(1e-6);
+        self.pairs.clear();
+        for (t, b) in bounds.enumerate() {
+            let (lo, hi) = (self.cell_of(b.mins), self.cell_of(b.maxs));
+            for x in lo.x..=hi.x {
+                for y in lo.y..=hi.y {
+                    for z in lo.z..=hi.z {
+                        self.pairs.push((Self::hash(IVec3::new(x, y, z)), t as u32));
+                    }
+                }
+            }
+        }
+        // Twice as many buckets as entries, so that few cells share one.
+        let buckets = (2 * self.pairs.len()).next_power_of_two().max(16);
+        self.mask = buckets as u32 - 1;
+        self.starts.clear();
+        self.starts.resize(buckets + 1, 0);
+        for &(hash, _) in &self.pairs {
+            self.starts[(hash & self.mask) as usize + 1] += 1;
+        }
+        for k in 1..self.starts.len() {
+            self.starts[k] += self.starts[k - 1];
+        }
+        self.items.clear();
+        self.items.resize(self.pairs.len(), 0);
+        // Place each pair at its bucket's next free slot (`starts` is shifted back after).
+        for &(hash, t) in &self.pairs {
+            let slot = &mut self.starts[(hash & self.mask) as usize];
+            self.items[*slot as usize] = t;
+            *slot += 1;
+        }
+        for k in (1..self.starts.len()).rev() {
+            self.starts[k] = self.starts[k - 1];
+        }
+        self.starts[0] = 0;
+    }
+
+    /// Calls `visit` with the triangles hashed into the cells `bounds` overlaps (a triangle may
+    /// come more than once, and hash collisions bring triangles from elsewhere: the narrow phase
+    /// decides).
+    pub(crate) fn for_each_near(&self, bounds: &Aabb, mut visit: impl FnMut(u32)) {
+        if self.items.is_empty() {
+            return;
+        }
+        let (lo, hi) = (self.cell_of(bounds.mins), self.cell_of(bounds.maxs));
+        for x in lo.x..=hi.x {
+            for y in lo.y..=hi.y {
+                for z in lo.z..=hi.z {
+                    let bucket = self.bucket(IVec3::new(x, y, z)) as usize;
+                    let (from, to) = (self.starts[bucket], self.starts[bucket + 1]);
+                    for &t in &self.items[from as usize..to as usize] {
+                        visit(t);
+                    }
+                }
+            }
+        }
+    }
+}
+
+/// The point of triangle `abc` closest to `p`, as barycentric weights (Ericson, "Real-Time
+/// Collision Detection", 5.1.5).
+pub(crate) fn closest_barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return Vec3::X;
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return Vec3::Y;
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return Vec3::new(1.0 - v, v, 0.0);
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return Vec3::Z;
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return Vec3::new(1.0 - w, 0.0, w);
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && (d4 - d3) >= 0.0 && (d5 - d6) >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return Vec3::new(0.0, 1.0 - w, w);
+    }
+    let denom = 1.0 / (va + vb + vc);
+    let (v, w) = (vb * denom, vc * denom);
+    Vec3::new(1.0 - v - w, v, w)
+}

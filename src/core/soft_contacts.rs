@@ -1,0 +1,809 @@
+//! Contacts between soft bodies, and of a body with itself: the boundary particles of one body
+//! against the boundary triangles of another, two-way.
+//!
+//! A particle closer than `thickness` to a triangle's outer side, or past it (within reach of
+//! the triangle), gets a normal impulse along the triangle's outward normal, and the triangle's
+//! three particles the opposite impulse, split by the particle's barycentric weights `b_j`:
+//! the pair's inverse mass is `w_p + sum b_j^2 w_j`, so linear momentum is conserved. Friction
+//! is Coulomb's on the relative velocity, with the two materials' combined coefficient.
+//!
+//! A step meets other bodies twice (the plugin's `Stage::Contacts` and `Stage::Integrate`, or
+//! [`step_bodies`]):
+//! - [`SoftContactPhase::Predicted`], before the contact stage: on the predicted positions
+//!   `x + h v`, changing velocities only (as the contacts with colliders do), so that the
+//!   bodies' own passes start from velocities that do not drive them into each other;
+//! - [`SoftContactPhase::Final`], after integration: on the positions the step ended at, moving
+//!   penetrating particles apart (split by inverse mass, so the centre of mass stays) and
+//!   removing their approaching normal velocity, so that no particle ends a step inside
+//!   another body. The volume passes in between keep the whole of a push into another body
+//!   (as into a rigid body, see `contacts.rs`): the neighbour is pushed back by these passes.
+//!
+//! Broad phase: bodies whose swept bounds overlap; within a pair, each body's boundary
+//! triangles are hashed into a uniform grid (cells of about a triangle's size, built once per
+//! pass, [`TriangleGrid`]) and a particle looks only in the cells its motion covers, so the
+//! cost grows with the boundary particles in the overlap, not with their product. Self
+//! contacts skip the triangles within two rest edges of the particle at rest: those are its
+//! neighbours on the same surface, not a fold.
+
+use std::ops::DerefMut;
+
+use glam::Vec3;
+use parry3d::bounding_volume::{Aabb, BoundingVolume};
+
+use super::body::SoftBodyState;
+use super::boundary::{Boundary, SoftContactSettings, TriangleGrid, closest_barycentric};
+use super::colliders::combined_friction;
+use super::colliders::{ColliderInstance, RigidSphereState};
+use super::contacts::MAX_DEPENETRATION_SPEED;
+use super::parallel::{Parallel, SharedSlice};
+use super::step::Stage;
+
+/// Which of a step's two soft-contact passes runs (see the module's documentation).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum SoftContactPhase {
+    /// Before the contact stage of a step of `h`: on `x + h v`, changing velocities.
+    Predicted(f32),
+    /// After integration: on `x`, moving particles apart and stopping their approach.
+    Final,
+}
+
+impl SoftContactPhase {
+    /// The time the positions are predicted ahead.
+    fn ahead(self) -> f32 {
+        match self {
+            SoftContactPhase::Predicted(h) => h,
+            SoftContactPhase::Final => 0.0,
+        }
+    }
+}
+
+/// The bounds of where `body`'s boundary particles are now and `ahead` seconds on.
+fn boundary_bounds(body: &SoftBodyState, ahead: f32) -> Option<Aabb> {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for &i in &body.boundary.particles {
+        let (x, v) = (body.positions[i as usize], body.velocities[i as usize]);
+        let end = x + ahead * v;
+        lo = lo.min(x).min(end);
+        hi = hi.max(x).max(end);
+    }
+    (lo.is_finite() && hi.is_finite()).then(|| Aabb::new(lo, hi))
+}
+
+impl SoftBodyState {
+    /// How this body meets other soft bodies (`None`: it passes through them).
+    pub fn soft_contact_settings(&self) -> Option<SoftContactSettings> {
+        self.soft_contacts
+    }
+
+    /// Sets how this body meets other soft bodies (`None`: it passes through them).
+    pub fn set_soft_contact_settings(&mut self, settings: Option<SoftContactSettings>) {
+        self.soft_contacts = settings;
+    }
+
+    /// The body's boundary triangles and particles.
+    pub fn boundary(&self) -> &Boundary {
+        &self.boundary
+    }
+
+    /// Records the particles the last soft-contact pass touched for the volume passes, which
+    /// keep none of a push into the other body, as against the ground: pushes into it that the
+    /// next contact pass would turn into velocity pump energy into a pile.
+    fn record_soft_contacts(&mut self) {
+        for k in 0..self.scratch.soft_touched.len() {
+            let (i, n) = self.scratch.soft_touched[k];
+            self.record_contact(i as usize, n, 0.0, None);
+        }
+    }
+
+    /// Hashes the boundary triangles where they are and `ahead` seconds on, grown by `margin`,
+    /// for this pass. Returns the bounds of the boundary particles (`None`: the body takes no
+    /// part in soft contacts).
+    fn prepare_soft_contacts(&mut self, ahead: f32, margin: f32) -> Option<Aabb> {
+        self.boundary.reach = None;
+        self.soft_contacts?;
+        let reach = boundary_bounds(self, ahead)?;
+        let (positions, velocities) = (&self.positions, &self.velocities);
+        let bounds = self.boundary.triangles.iter().map(|t| {
+            let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+            for &i in t {
+                let (x, v) = (positions[i as usize], velocities[i as usize]);
+                lo = lo.min(x).min(x + ahead * v);
+                hi = hi.max(x).max(x + ahead * v);
+            }
+            Aabb::new(lo, hi).loosened(margin)
+        });
+        let cell = self.boundary.longest_edge;
+        self.boundary.grid.build(cell, bounds);
+        self.boundary.reach = Some(reach);
+        Some(reach)
+    }
+}
+
+/// A body's particles as the narrow phase reads and writes them; for a self contact both
+/// sides are the same arrays (hence shared slices, read and written one element at a time on
+/// this thread).
+struct Arrays<'a> {
+    x: SharedSlice<'a, Vec3>,
+    v: SharedSlice<'a, Vec3>,
+    w: &'a [f32],
+}
+
+impl<'a> Arrays<'a> {
+    fn new(x: &'a mut [Vec3], v: &'a mut [Vec3], w: &'a [f32]) -> Self {
+        // SAFETY: the narrow phase runs on this thread alone, reading and writing one element
+        // at a time and holding no reference into the slices.
+        unsafe {
+            Arrays {
+                x: SharedSlice::new(x),
+                v: SharedSlice::new(v),
+                w,
+            }
+        }
+    }
+}
+
+/// One pass of soft contacts among `bodies` (every pair whose bounds overlap, and each body
+/// with itself where it asks for it), in the order of the slice. Returns the contacts.
+pub fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
+    bodies: &mut [B],
+    phase: SoftContactPhase,
+) -> u32 {
+    for body in bodies.iter_mut() {
+        prepare_soft_pass(body, phase);
+    }
+    let mut contacts = 0;
+    for a in 0..bodies.len() {
+        contacts += resolve_self(&mut bodies[a], phase);
+        for b in a + 1..bodies.len() {
+            let (left, right) = bodies.split_at_mut(b);
+            let (Some(ra), Some(rb)) = (left[a].boundary.reach, right[0].boundary.reach) else {
+                continue;
+            };
+            if ra.intersects(&rb) {
+                contacts += resolve_pair(&mut left[a], &mut right[0], phase, &ra, &rb);
+            }
+        }
+    }
+    contacts
+}
+
+/// Prepares `body` for a pass of `phase` (its triangle grid); returns its bounds, if it takes
+/// part. The plugin calls this on every body, then [`resolve_pair`] on the overlapping pairs
+/// and [`resolve_self`] on each body.
+pub fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) -> Option<Aabb> {
+    let margin = body.soft_contacts.map_or(0.0, |s| s.thickness);
+    body.prepare_soft_contacts(phase.ahead(), margin)
+}
+
+/// Contacts between two different bodies (both ways: `a`'s particles against `b`'s triangles,
+/// then `b`'s against `a`'s), whose prepared bounds are `ra` and `rb`.
+pub fn resolve_pair(
+    a: &mut SoftBodyState,
+    b: &mut SoftBodyState,
+    phase: SoftContactPhase,
+    ra: &Aabb,
+    rb: &Aabb,
+) -> u32 {
+    let (Some(sa), Some(sb)) = (a.soft_contacts, b.soft_contacts) else {
+        return 0;
+    };
+    if a.is_sleeping() && b.is_sleeping() {
+        return 0;
+    }
+    let thickness = sa.thickness.max(sb.thickness);
+    let overlap = Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)).loosened(thickness);
+    let mu = combined_friction(a.material.friction, b.material.friction);
+    let pa = Arrays::new(&mut a.positions, &mut a.velocities, &a.inv_masses);
+    let pb = Arrays::new(&mut b.positions, &mut b.velocities, &b.inv_masses);
+    let (ba, bb) = (&a.boundary, &b.boundary);
+    let contact = Contact {
+        phase,
+        thickness,
+        friction: mu,
+    };
+    let (ta, tb) = (&mut a.scratch.soft_touched, &mut b.scratch.soft_touched);
+    ta.clear();
+    tb.clear();
+    let contacts =
+        contact.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta)
+            + contact.particles_against_triangles(&bb.particles, &pb, ba, &pa, None, &overlap, tb);
+    a.record_soft_contacts();
+    b.record_soft_contacts();
+    // A sleeping body touched by a moving one wakes; two sleeping ones stay as they are.
+    if contacts > 0 {
+        if a.is_sleeping() && !b.is_sleeping() {
+            a.wake_up();
+        } else if b.is_sleeping() && !a.is_sleeping() {
+            b.wake_up();
+        }
+    }
+    contacts
+}
+
+/// Contacts of a body with itself, if it asks for them.
+pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase) -> u32 {
+    let Some(settings) = body.soft_contacts.filter(|s| s.self_contacts) else {
+        return 0;
+    };
+    let Some(reach) = boundary_bounds(body, phase.ahead()) else {
+        return 0;
+    };
+    let arrays = Arrays::new(&mut body.positions, &mut body.velocities, &body.inv_masses);
+    let contact = Contact {
+        phase,
+        thickness: settings.thickness,
+        friction: body.material.friction,
+    };
+    let boundary = &body.boundary;
+    let rest = body.mesh.positions();
+    let touched = &mut body.scratch.soft_touched;
+    touched.clear();
+    let contacts = contact.particles_against_triangles(
+        &boundary.particles,
+        &arrays,
+        boundary,
+        &arrays,
+        Some(rest),
+        &reach,
+        touched,
+    );
+    body.record_soft_contacts();
+    contacts
+}
+
+/// Where `xp` is against the triangle `corners` (outward by its winding): its signed distance
+/// to the surface, the direction that pushes it out, and the barycentric weights of the
+/// nearest point. Over the triangle the distance is along the normal; off past an edge or
+/// corner on the outer side it is the distance to that edge or corner, pushed away from it.
+/// `None` for a degenerate triangle.
+fn surface_distance(xp: Vec3, corners: [Vec3; 3]) -> Option<(f32, Vec3, Vec3)> {
+    let [a, b, c] = corners;
+    let n = (b - a).cross(c - a).try_normalize()?;
+    let q = closest_barycentric(xp, a, b, c);
+    let offset = xp - (a * q.x + b * q.y + c * q.z);
+    let distance = offset.length();
+    let over = (offset - n * offset.dot(n)).length_squared() <= 1e-12 * (1.0 + distance);
+    if offset.dot(n) >= 0.0 && !over && distance > 0.0 {
+        if std::env::var("EDGEPUSH").is_ok() {
+            Some((distance, offset / distance, q))
+        } else {
+            Some((f32::INFINITY, n, q))
+        }
+    } else {
+        Some((offset.dot(n), n, q))
+    }
+}
+
+/// The part of a predicted penetration `depth` to remove within a step of `h`: all that the
+/// motion adds, and the penetration `existing` before it at most at
+/// [`MAX_DEPENETRATION_SPEED`], so that a particle already deep in a body is eased out rather
+/// than shot out (as against a sphere, `contacts.rs`).
+fn bounded_correction(depth: f32, existing: f32, h: f32) -> f32 {
+    let existing = existing.max(0.0);
+    depth
+        .min(depth - existing + MAX_DEPENETRATION_SPEED * h)
+        .max(0.0)
+}
+
+/// Whether `x` is outside the plane of the triangle `corners` (or within `thickness` of it):
+/// where a particle was before it moved decides whether a deep one came through the surface
+/// or lies past the far side of a thin part.
+fn outside_of(x: Vec3, corners: [Vec3; 3], thickness: f32) -> bool {
+    let [a, b, c] = corners;
+    (x - a).dot((b - a).cross(c - a).normalize_or_zero()) > -thickness
+}
+
+/// The triangle of `triangles` (corners at `corner(j)`) that the grid lists near `swept` and
+/// is nearest `xp`, skipping those `skip` rejects.
+fn nearest_triangle(
+    xp: Vec3,
+    swept: &Aabb,
+    grid: &TriangleGrid,
+    triangles: &[[u32; 3]],
+    corner: impl Fn(usize) -> Vec3,
+    mut skip: impl FnMut([u32; 3]) -> bool,
+) -> Option<[usize; 3]> {
+    // Nearest first; among triangles as near (sharing the nearest edge or corner), the one
+    // the particle lies most squarely over, so that a particle over the top face next to its
+    // edge is met by the top face, not by the side face below the same edge, whichever the
+    // grid lists first.
+    let mut nearest: Option<([usize; 3], f32, f32)> = None;
+    grid.for_each_near(swept, |k| {
+        let tri = triangles[k as usize];
+        if skip(tri) {
+            return;
+        }
+        let corners = tri.map(|j| j as usize);
+        let end = corners.map(&corner);
+        let q = closest_barycentric(xp, end[0], end[1], end[2]);
+        let offset = xp - (end[0] * q.x + end[1] * q.y + end[2] * q.z);
+        let distance = offset.length_squared();
+        let normal = (end[1] - end[0]).cross(end[2] - end[0]).normalize_or_zero();
+        let squarely = offset.normalize_or_zero().dot(normal).abs();
+        let better = nearest.is_none_or(|(_, best, best_squarely)| {
+            let tie = 1e-6 * best.max(distance) + 1e-14;
+            distance < best - tie || (distance <= best + tie && squarely > best_squarely)
+        });
+        if better {
+            nearest = Some((corners, distance, squarely));
+        }
+    });
+    nearest.map(|(corners, ..)| corners)
+}
+
+/// A pass's contact rule.
+struct Contact {
+    phase: SoftContactPhase,
+    thickness: f32,
+    friction: f32,
+}
+
+impl Contact {
+    /// The narrow phase: each of `particles` (of `p`) inside `region` against the triangles of
+    /// `boundary` (of `t`) near it. For a self contact (`p` and `t` the same), `rest` holds the
+    /// rest positions, and the triangles within two longest boundary edges of the particle at
+    /// rest are skipped (its neighbours on the same surface).
+    fn particles_against_triangles(
+        &self,
+        particles: &[u32],
+        p: &Arrays,
+        boundary: &Boundary,
+        t: &Arrays,
+        rest: Option<&[Vec3]>,
+        region: &Aabb,
+        touched: &mut Vec<(u32, Vec3)>,
+    ) -> u32 {
+        let ahead = self.phase.ahead();
+        let thickness = self.thickness;
+        // A particle past a triangle by more than this is taken to be on its far side (the
+        // other face of a thin part), unless it was outside where the motion started.
+        let reach = boundary.longest_edge;
+        let mut contacts = 0;
+        let rev = std::env::var("REV").is_ok();
+        for k in 0..particles.len() {
+            let i = if rev {
+                particles[particles.len() - 1 - k]
+            } else {
+                particles[k]
+            };
+            let i = i as usize;
+            let w_p = p.w[i];
+            let x = p.x.get(i);
+            let xp = x + ahead * p.v.get(i);
+            let swept = Aabb::new(x.min(xp), x.max(xp)).loosened(thickness);
+            if !swept.intersects(region) {
+                continue;
+            }
+            // The nearest triangle decides, as a signed distance would: a particle over the
+            // top face near its edge is outside the body, whatever the side face's plane says.
+            let nearest = nearest_triangle(
+                xp,
+                &swept,
+                &boundary.grid,
+                &boundary.triangles,
+                |j| t.x.get(j) + ahead * t.v.get(j),
+                |tri| {
+                    rest.is_some_and(|rest| {
+                        if tri.contains(&(i as u32)) {
+                            return true;
+                        }
+                        let [a, b, c] = tri.map(|j| rest[j as usize]);
+                        let q = closest_barycentric(rest[i], a, b, c);
+                        (a * q.x + b * q.y + c * q.z).distance(rest[i]) < 2.0 * reach
+                    })
+                },
+            );
+            if let Some(corners) = nearest
+                && let Some(n) = self.resolve(i, w_p, p, corners, t, reach)
+            {
+                touched.push((i as u32, n));
+                contacts += 1;
+            }
+        }
+        contacts
+    }
+
+    /// Particle `i` of `p` (inverse mass `w_p`) against the triangle `corners` of `t`. Returns
+    /// whether they touched.
+    fn resolve(
+        &self,
+        i: usize,
+        w_p: f32,
+        p: &Arrays,
+        corners: [usize; 3],
+        t: &Arrays,
+        reach: f32,
+    ) -> Option<Vec3> {
+        let ahead = self.phase.ahead();
+        let thickness = self.thickness;
+        let (x, v) = (p.x.get(i), p.v.get(i));
+        let xp = x + ahead * v;
+        let now = corners.map(|j| t.x.get(j));
+        let end = corners.map(|j| t.x.get(j) + ahead * t.v.get(j));
+        let was_outside = outside_of(x, now, thickness);
+        let Some((d, n, q)) = surface_distance(xp, end) else {
+            return None;
+        };
+        if d >= thickness || (d < -reach && !was_outside) {
+            return None;
+        }
+        let w_t: f32 = (0..3).map(|k| q[k] * q[k] * t.w[corners[k]]).sum();
+        let w = w_p + w_t;
+        if w == 0.0 {
+            return None;
+        }
+        // The predicted pass keeps the gap; the final pass only undoes penetration (moving
+        // particles apart within the gap, with no friction to hold them, would let a pile walk).
+        // The gap only finds contacts early; a contact takes the particle to the surface, as
+        // the ground does (pushing it out to the gap would bounce a resting pile).
+        if d >= 0.0 && std::env::var("GAPPUSH").is_err() {
+            return None;
+        }
+        let depth = if std::env::var("GAPPUSH").is_ok() {
+            thickness - d
+        } else {
+            -d
+        };
+        // An impulse (per unit mass of the pair) on the particle, and its opposite shared by
+        // the triangle's corners.
+        let push = |impulse: Vec3| {
+            p.v.set(i, p.v.get(i) + impulse * w_p);
+            for k in 0..3 {
+                let j = corners[k];
+                t.v.set(j, t.v.get(j) - impulse * (q[k] * t.w[j]));
+            }
+        };
+        let relative = || p.v.get(i) - (0..3).map(|k| q[k] * t.v.get(corners[k])).sum::<Vec3>();
+        let normal_impulse = match self.phase {
+            SoftContactPhase::Predicted(h) => {
+                let existing =
+                    surface_distance(x, now).map_or(0.0, |(d_now, ..)| thickness - d_now);
+                let lambda = bounded_correction(depth, existing, h) / h / w;
+                push(n * lambda);
+                lambda
+            }
+            SoftContactPhase::Final => {
+                let shift = depth / w;
+                p.x.set(i, p.x.get(i) + n * (shift * w_p));
+                for k in 0..3 {
+                    let j = corners[k];
+                    t.x.set(j, t.x.get(j) - n * (shift * q[k] * t.w[j]));
+                }
+                let approach = relative().dot(n);
+                let lambda = (-approach / w).max(0.0);
+                push(n * lambda);
+                lambda
+            }
+        };
+        // Coulomb friction on the relative tangential velocity.
+        let rel = relative();
+        let slip = rel - n * rel.dot(n);
+        let slip_speed = slip.length();
+        if slip_speed > 0.0 && normal_impulse > 0.0 {
+            let jt = (slip_speed / w).min(self.friction * normal_impulse);
+            push(-slip * (jt / slip_speed));
+        }
+        Some(n)
+    }
+}
+
+/// The contact stage of bodies that may touch each other: their substeps run in lockstep
+/// (as many as the most any of them needs), and after each substep's shape solve a two-way
+/// soft-contact pass on the substep's predicted positions, before each body's own contacts and
+/// volume impulses, as the ground meets a single body. Bodies not solved in substeps (the
+/// paper's springs) take no part here. Returns the contacts.
+pub fn shape_pass_together<B: DerefMut<Target = SoftBodyState>>(
+    bodies: &mut [B],
+    h: f32,
+    spheres: &mut [RigidSphereState],
+    colliders: &[ColliderInstance],
+    parallel: &dyn Parallel,
+) -> u32 {
+    let substeps = bodies
+        .iter()
+        .filter_map(|b| b.substeps_needed(h, spheres, colliders))
+        .max();
+    let Some(substeps) = substeps else {
+        return 0;
+    };
+    for body in bodies.iter_mut() {
+        body.scratch.substep_plan = body.plan_substeps(h, spheres, colliders, Some(substeps));
+    }
+    let mut contacts = 0;
+    for k in 0..substeps {
+        for body in bodies.iter_mut() {
+            if let Some(plan) = body.scratch.substep_plan {
+                body.substep_motion(&plan, k);
+            }
+        }
+        let hs = h / substeps as f32;
+        contacts += soft_contact_pass(bodies, SoftContactPhase::Predicted(hs));
+        for body in bodies.iter_mut() {
+            if let Some(plan) = body.scratch.substep_plan {
+                contacts += body.substep_contacts(&plan, k, spheres, colliders);
+                body.substep_finish(&plan, spheres, parallel);
+            }
+        }
+    }
+    for body in bodies.iter_mut() {
+        if body.scratch.substep_plan.take().is_some() {
+            body.update_sleep(h, spheres, colliders);
+        }
+    }
+    contacts
+}
+
+/// A whole step of several bodies that meet each other, in the plugin's order: a soft-contact
+/// pass on the predicted positions before the contact stage, the contact stage's substeps
+/// in lockstep ([`shape_pass_together`]), each body's other stages ([`Stage::ORDER`]), and a
+/// pass on the final positions after integration. For using the core without Bevy, and for
+/// tests and benchmarks of piles.
+pub fn step_bodies(
+    bodies: &mut [SoftBodyState],
+    h: f32,
+    gravity: Vec3,
+    colliders: &[ColliderInstance],
+    parallel: &dyn Parallel,
+) -> u32 {
+    let mut bodies: Vec<&mut SoftBodyState> = bodies.iter_mut().collect();
+    let mut contacts = 0;
+    for body in bodies.iter_mut() {
+        body.begin_step();
+    }
+    for stage in Stage::ORDER {
+        if stage == Stage::Contacts {
+            if std::env::var("NOPRED").is_err() {
+                contacts += soft_contact_pass(&mut bodies, SoftContactPhase::Predicted(h));
+            }
+            for body in bodies.iter_mut() {
+                contacts += body.resolve_contacts_outside_substeps(h, &mut [], colliders, parallel);
+            }
+            contacts += shape_pass_together(&mut bodies, h, &mut [], colliders, parallel);
+            continue;
+        }
+        for body in bodies.iter_mut() {
+            contacts += body.run_stage(stage, h, gravity, &mut [], colliders, parallel);
+        }
+        if stage == Stage::Integrate && std::env::var("NOFINAL").is_err() {
+            contacts += soft_contact_pass(&mut bodies, SoftContactPhase::Final);
+        }
+    }
+    contacts
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::geometry::signed_volume;
+    use crate::core::material::SoftBodyMaterial;
+    use crate::core::parallel::Serial;
+    use glam::UVec3;
+    use parry3d::math::Pose;
+    use parry3d::shape::SharedShape;
+
+    /// A jelly cube of `side` metres, 6 cells a side, its lowest corner at `corner`.
+    fn jelly(side: f32, corner: Vec3) -> SoftBodyState {
+        let mesh = crate::core::box_grid(UVec3::splat(6), Vec3::splat(side / 6.0), corner).unwrap();
+        SoftBodyState::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap()
+    }
+
+    /// How deep `x` is inside `body` (zero outside): its distance to the body's boundary when
+    /// it lies in one of its tets.
+    pub(super) fn depth_inside(x: Vec3, body: &SoftBodyState) -> f32 {
+        let p = body.positions();
+        let inside = body.mesh().tets().iter().any(|t| {
+            let [a, b, c, d] = t.map(|i| p[i as usize]);
+            let whole = signed_volume(&[a, b, c, d]);
+            let parts = [
+                signed_volume(&[x, b, c, d]),
+                signed_volume(&[a, x, c, d]),
+                signed_volume(&[a, b, x, d]),
+                signed_volume(&[a, b, c, x]),
+            ];
+            parts.iter().all(|&v| v * whole.signum() >= 0.0)
+        });
+        if !inside {
+            return 0.0;
+        }
+        body.boundary()
+            .triangles()
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| p[i as usize]);
+                let q = closest_barycentric(x, a, b, c);
+                (a * q.x + b * q.y + c * q.z).distance(x)
+            })
+            .fold(f32::INFINITY, f32::min)
+    }
+
+    /// The deepest any particle of one body is inside another.
+    pub(super) fn deepest(bodies: &[SoftBodyState]) -> f32 {
+        let mut deepest = 0.0f32;
+        for (a, body) in bodies.iter().enumerate() {
+            for (b, other) in bodies.iter().enumerate() {
+                if a != b {
+                    for &x in body.positions() {
+                        deepest = deepest.max(depth_inside(x, other));
+                    }
+                }
+            }
+        }
+        deepest
+    }
+
+    fn momentum(bodies: &[SoftBodyState]) -> Vec3 {
+        bodies
+            .iter()
+            .flat_map(|b| b.velocities().iter().zip(b.masses()))
+            .map(|(&v, &m)| m * v)
+            .sum()
+    }
+
+    /// Two jellies thrown at each other in space (4 m/s each, off-centre) bounce apart: they
+    /// end moving away from each other, no particle of one ends a step more than a millimetre
+    /// inside the other, and their linear momentum is what it was.
+    #[test]
+    fn two_jellies_thrown_at_each_other_bounce_apart() {
+        let mut bodies = [
+            jelly(0.3, Vec3::new(-0.5, 0.0, 0.0)),
+            jelly(0.3, Vec3::new(0.25, 0.08, 0.05)),
+        ];
+        bodies[0].velocities_mut().fill(Vec3::X * 4.0);
+        bodies[1].velocities_mut().fill(-Vec3::X * 4.0);
+        let before = momentum(&bodies);
+        let mut worst = 0.0f32;
+        let mut contacts = 0;
+        for _ in 0..30 {
+            contacts += step_bodies(&mut bodies, 1.0 / 60.0, Vec3::ZERO, &[], &Serial);
+            worst = worst.max(deepest(&bodies));
+        }
+        assert!(contacts > 50, "{contacts} contacts");
+        let after = momentum(&bodies);
+        let mut free = [
+            jelly(0.3, Vec3::new(-0.5, 0.0, 0.0)),
+            jelly(0.3, Vec3::new(0.25, 0.08, 0.05)),
+        ];
+        free[0].velocities_mut().fill(Vec3::X * 4.0);
+        free[1].velocities_mut().fill(-Vec3::X * 4.0);
+        for b in free.iter_mut() {
+            b.set_soft_contact_settings(None);
+        }
+        for _ in 0..30 {
+            step_bodies(&mut free, 1.0 / 60.0, Vec3::ZERO, &[], &Serial);
+        }
+        println!("without contacts: {} ; with {}", momentum(&free), after);
+        let carried = 2.0 * 4.0 * bodies[0].masses().iter().sum::<f32>();
+        assert!(
+            (after - before).length() < 1e-4 * carried,
+            "momentum {before} -> {after}"
+        );
+        let apart = bodies[1].centre_of_mass().x - bodies[0].centre_of_mass().x;
+        let closing = (bodies[1].velocities().iter().sum::<Vec3>()
+            - bodies[0].velocities().iter().sum::<Vec3>())
+        .x;
+        assert!(
+            apart > 0.3 && closing > 0.0,
+            "apart {apart} m, closing {closing}"
+        );
+        assert!(
+            worst < 1e-3,
+            "a particle ended a step {worst} m inside the other body"
+        );
+    }
+
+    /// Three jellies dropped in a stack on the ground stay stacked, come to rest, keep their
+    /// volumes within 1 %, and no particle ends inside another body by more than a millimetre.
+    #[test]
+    fn a_stack_of_three_jellies_stays_stacked() {
+        let ground = [ColliderInstance::new(
+            SharedShape::halfspace(Vec3::Y),
+            Pose::IDENTITY,
+            0.8,
+        )];
+        let mut bodies = [
+            jelly(0.3, Vec3::new(0.0, 0.0, 0.0)),
+            jelly(0.3, Vec3::new(0.03, 0.32, -0.02)),
+            jelly(0.3, Vec3::new(-0.02, 0.64, 0.03)),
+        ];
+        let g = Vec3::new(0.0, -9.81, 0.0);
+        let mut worst = 0.0f32;
+        for step in 0..240 {
+            step_bodies(&mut bodies, 1.0 / 60.0, g, &ground, &Serial);
+            if step % 10 == 9 {
+                worst = worst.max(deepest(&bodies));
+            }
+        }
+        for body in &bodies {
+            println!(
+                "centre {} volume {}",
+                body.centre_of_mass(),
+                body.volume_metrics().volume_error_pct
+            );
+        }
+        println!("deepest {worst}");
+        for (k, body) in bodies.iter().enumerate() {
+            let centre = body.centre_of_mass();
+            assert!(
+                (centre.y - (0.15 + 0.3 * k as f32)).abs() < 0.04,
+                "jelly {k} at {centre}"
+            );
+            assert!(
+                Vec3::new(centre.x - 0.15, 0.0, centre.z - 0.15).length() < 0.06,
+                "jelly {k} slid to {centre}"
+            );
+            let speed = body
+                .velocities()
+                .iter()
+                .map(|v| v.length())
+                .fold(0.0, f32::max);
+            assert!(speed < 0.05, "jelly {k} still moves at {speed} m/s");
+            let error = body.volume_metrics().volume_error_pct;
+            assert!(error.abs() < 1.0, "jelly {k}: volume error {error} %");
+        }
+        assert!(
+            worst < 1e-3,
+            "a particle ended a step {worst} m inside another body"
+        );
+    }
+}
+#[cfg(test)]
+mod debug_tests {
+    use super::*;
+    use crate::core::material::SoftBodyMaterial;
+    use crate::core::parallel::Serial;
+    use glam::UVec3;
+    use parry3d::math::Pose;
+    use parry3d::shape::SharedShape;
+
+    #[test]
+    fn debug_two_stack() {
+        let ground = [ColliderInstance::new(
+            SharedShape::halfspace(Vec3::Y),
+            Pose::IDENTITY,
+            0.8,
+        )];
+        let mk = |c: Vec3| {
+            let mesh = crate::core::box_grid(UVec3::splat(6), Vec3::splat(0.05), c).unwrap();
+            let e: f32 = std::env::var("E")
+                .map(|v| v.parse().unwrap())
+                .unwrap_or(2e4);
+            let mut m = SoftBodyMaterial::elastic(1050.0, e, 0.01);
+            if let Ok(f) = std::env::var("MU") {
+                m.friction = f.parse().unwrap();
+            }
+            SoftBodyState::new(mesh.into(), m).unwrap()
+        };
+        let off = if std::env::var("ALIGN").is_ok() {
+            Vec3::new(0.0, 0.32, 0.0)
+        } else {
+            Vec3::new(0.03, 0.32, -0.02)
+        };
+        let mut bodies = [mk(Vec3::ZERO), mk(off)];
+        let g = Vec3::new(0.0, -9.81, 0.0);
+        let h = 1.0 / 60.0;
+        for step in 0..240 {
+            let c = step_bodies(&mut bodies, h, g, &ground, &Serial);
+            if step % 10 == 0 || (step > 3 && step < 12) {
+                let n = bodies[0].substeps_needed(h, &[], &ground);
+                println!(
+                    "{step} sub {n:?} c {c} centres {} {} vmax {:.3} {:.3} deepest {:.4} vol {:.2} {:.2}",
+                    bodies[0].centre_of_mass(),
+                    bodies[1].centre_of_mass(),
+                    bodies[0]
+                        .velocities()
+                        .iter()
+                        .map(|v| v.length())
+                        .fold(0.0f32, f32::max),
+                    bodies[1]
+                        .velocities()
+                        .iter()
+                        .map(|v| v.length())
+                        .fold(0.0f32, f32::max),
+                    super::tests::deepest(&bodies),
+                    bodies[0].volume_metrics().volume_error_pct,
+                    bodies[1].volume_metrics().volume_error_pct
+                );
+            }
+        }
+    }
+}
