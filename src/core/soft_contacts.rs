@@ -35,6 +35,7 @@ use super::boundary::{Boundary, SoftContactSettings, TriangleGrid, closest_baryc
 use super::colliders::combined_friction;
 use super::colliders::{ColliderInstance, RigidSphereState};
 use super::contacts::MAX_DEPENETRATION_SPEED;
+use super::lanes::Point4;
 use super::parallel::{Parallel, SharedSlice};
 use super::step::Stage;
 
@@ -45,6 +46,10 @@ pub enum SoftContactPhase {
     Predicted(f32),
     /// After integration: on `x`, moving particles apart and stopping their approach.
     Final,
+    /// Inside a substep, on the positions the shape solve predicted (before they become
+    /// velocities): moving particles apart, with friction on their relative motion since the
+    /// substep's start, as XPBD meets contacts.
+    Substep,
 }
 
 impl SoftContactPhase {
@@ -52,7 +57,7 @@ impl SoftContactPhase {
     fn ahead(self) -> f32 {
         match self {
             SoftContactPhase::Predicted(h) => h,
-            SoftContactPhase::Final => 0.0,
+            SoftContactPhase::Final | SoftContactPhase::Substep => 0.0,
         }
     }
 }
@@ -126,10 +131,12 @@ struct Arrays<'a> {
     x: SharedSlice<'a, Vec3>,
     v: SharedSlice<'a, Vec3>,
     w: &'a [f32],
+    /// Where each particle started the substep (for [`SoftContactPhase::Substep`]).
+    start: &'a [Point4],
 }
 
 impl<'a> Arrays<'a> {
-    fn new(x: &'a mut [Vec3], v: &'a mut [Vec3], w: &'a [f32]) -> Self {
+    fn new(x: &'a mut [Vec3], v: &'a mut [Vec3], w: &'a [f32], start: &'a [Point4]) -> Self {
         // SAFETY: the narrow phase runs on this thread alone, reading and writing one element
         // at a time and holding no reference into the slices.
         unsafe {
@@ -137,6 +144,7 @@ impl<'a> Arrays<'a> {
                 x: SharedSlice::new(x),
                 v: SharedSlice::new(v),
                 w,
+                start,
             }
         }
     }
@@ -193,8 +201,18 @@ pub fn resolve_pair(
     let thickness = sa.thickness.max(sb.thickness);
     let overlap = Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)).loosened(thickness);
     let mu = combined_friction(a.material.friction, b.material.friction);
-    let pa = Arrays::new(&mut a.positions, &mut a.velocities, &a.inv_masses);
-    let pb = Arrays::new(&mut b.positions, &mut b.velocities, &b.inv_masses);
+    let pa = Arrays::new(
+        &mut a.positions,
+        &mut a.velocities,
+        &a.inv_masses,
+        &a.scratch.predicted,
+    );
+    let pb = Arrays::new(
+        &mut b.positions,
+        &mut b.velocities,
+        &b.inv_masses,
+        &b.scratch.predicted,
+    );
     let (ba, bb) = (&a.boundary, &b.boundary);
     let contact = Contact {
         phase,
@@ -228,7 +246,12 @@ pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase) -> u32 {
     let Some(reach) = boundary_bounds(body, phase.ahead()) else {
         return 0;
     };
-    let arrays = Arrays::new(&mut body.positions, &mut body.velocities, &body.inv_masses);
+    let arrays = Arrays::new(
+        &mut body.positions,
+        &mut body.velocities,
+        &body.inv_masses,
+        &body.scratch.predicted,
+    );
     let contact = Contact {
         phase,
         thickness: settings.thickness,
@@ -263,12 +286,11 @@ fn surface_distance(xp: Vec3, corners: [Vec3; 3]) -> Option<(f32, Vec3, Vec3)> {
     let offset = xp - (a * q.x + b * q.y + c * q.z);
     let distance = offset.length();
     let over = (offset - n * offset.dot(n)).length_squared() <= 1e-12 * (1.0 + distance);
+    if !over && std::env::var("EDGEOK").is_err() {
+        return Some((f32::INFINITY, n, q));
+    }
     if offset.dot(n) >= 0.0 && !over && distance > 0.0 {
-        if std::env::var("EDGEPUSH").is_ok() {
-            Some((distance, offset / distance, q))
-        } else {
-            Some((f32::INFINITY, n, q))
-        }
+        Some((f32::INFINITY, n, q))
     } else {
         Some((offset.dot(n), n, q))
     }
@@ -444,6 +466,29 @@ impl Contact {
         } else {
             -d
         };
+        if self.phase == SoftContactPhase::Substep {
+            // Apart along the normal, then friction on the relative motion since the substep
+            // started: held (static) if it is within `mu` times the push, else slowed by it.
+            let shift = depth / w;
+            let moved = |k_shift: Vec3| {
+                p.x.set(i, p.x.get(i) + k_shift * w_p);
+                for k in 0..3 {
+                    let j = corners[k];
+                    t.x.set(j, t.x.get(j) - k_shift * (q[k] * t.w[j]));
+                }
+            };
+            moved(n * shift);
+            let travel = |a: &Arrays, j: usize| a.x.get(j) - a.start[j].vec3();
+            let relative_motion =
+                travel(p, i) - (0..3).map(|k| q[k] * travel(t, corners[k])).sum::<Vec3>();
+            let slip = relative_motion - n * relative_motion.dot(n);
+            let slip_length = slip.length();
+            if slip_length > 0.0 {
+                let held = (self.friction * depth / slip_length).min(1.0);
+                moved(-slip * (held / w));
+            }
+            return Some(n);
+        }
         // An impulse (per unit mass of the pair) on the particle, and its opposite shared by
         // the triangle's corners.
         let push = |impulse: Vec3| {
@@ -456,12 +501,12 @@ impl Contact {
         let relative = || p.v.get(i) - (0..3).map(|k| q[k] * t.v.get(corners[k])).sum::<Vec3>();
         let normal_impulse = match self.phase {
             SoftContactPhase::Predicted(h) => {
-                let existing =
-                    surface_distance(x, now).map_or(0.0, |(d_now, ..)| thickness - d_now);
+                let existing = surface_distance(x, now).map_or(0.0, |(d_now, ..)| -d_now);
                 let lambda = bounded_correction(depth, existing, h) / h / w;
                 push(n * lambda);
                 lambda
             }
+            SoftContactPhase::Substep => unreachable!("handled above"),
             SoftContactPhase::Final => {
                 let shift = depth / w;
                 p.x.set(i, p.x.get(i) + n * (shift * w_p));
@@ -516,8 +561,22 @@ pub fn shape_pass_together<B: DerefMut<Target = SoftBodyState>>(
                 body.substep_motion(&plan, k);
             }
         }
-        let hs = h / substeps as f32;
-        contacts += soft_contact_pass(bodies, SoftContactPhase::Predicted(hs));
+        if std::env::var("VELSUB").is_ok() {
+            for body in bodies.iter_mut() {
+                if let Some(plan) = body.scratch.substep_plan {
+                    body.substep_velocities(&plan);
+                }
+            }
+            let hs = h / substeps as f32;
+            contacts += soft_contact_pass(bodies, SoftContactPhase::Predicted(hs));
+        } else {
+            contacts += soft_contact_pass(bodies, SoftContactPhase::Substep);
+            for body in bodies.iter_mut() {
+                if let Some(plan) = body.scratch.substep_plan {
+                    body.substep_velocities(&plan);
+                }
+            }
+        }
         for body in bodies.iter_mut() {
             if let Some(plan) = body.scratch.substep_plan {
                 contacts += body.substep_contacts(&plan, k, spheres, colliders);
@@ -763,7 +822,12 @@ mod debug_tests {
             0.8,
         )];
         let mk = |c: Vec3| {
-            let mesh = crate::core::box_grid(UVec3::splat(6), Vec3::splat(0.05), c).unwrap();
+            let size: f32 = std::env::var("SIZE")
+                .map(|v| v.parse().unwrap())
+                .unwrap_or(0.3);
+            let mesh =
+                crate::core::box_grid(UVec3::splat(6), Vec3::splat(size / 6.0), c * (size / 0.3))
+                    .unwrap();
             let e: f32 = std::env::var("E")
                 .map(|v| v.parse().unwrap())
                 .unwrap_or(2e4);
@@ -804,6 +868,72 @@ mod debug_tests {
                     bodies[1].volume_metrics().volume_error_pct
                 );
             }
+        }
+    }
+}
+#[cfg(test)]
+mod debug_lateral {
+    use super::*;
+    use crate::core::material::SoftBodyMaterial;
+    use glam::UVec3;
+    #[test]
+    fn debug_lateral_push() {
+        let mk = |c: Vec3| {
+            let mesh = crate::core::box_grid(UVec3::splat(6), Vec3::splat(0.05), c).unwrap();
+            SoftBodyState::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap()
+        };
+        for (name, off) in [
+            ("aligned", Vec3::new(0.0, 0.298, 0.0)),
+            ("offset", Vec3::new(0.03, 0.298, -0.02)),
+        ] {
+            let mut bodies = [mk(Vec3::ZERO), mk(off)];
+            for b in bodies.iter_mut() {
+                for i in 0..b.positions().len() {
+                    b.scratch.predicted[i] = crate::core::lanes::Point4::new(b.positions[i]);
+                }
+            }
+            let before: Vec<Vec3> = bodies[1].positions().to_vec();
+            let mut refs: Vec<&mut SoftBodyState> = bodies.iter_mut().collect();
+            let c = soft_contact_pass(&mut refs, SoftContactPhase::Substep);
+            let moved: Vec3 = bodies[1]
+                .positions()
+                .iter()
+                .zip(&before)
+                .zip(bodies[1].masses())
+                .map(|((a, b), &m)| m * (*a - *b))
+                .sum();
+            println!("{name}: {c} contacts, upper's mass-weighted shift {moved}");
+            let b0 = &bodies[0];
+            let b1 = &bodies[1];
+            let mut none = 0;
+            let mut found = 0;
+            let mut dists = Vec::new();
+            for &i in &b1.boundary.particles {
+                let xp = b1.positions[i as usize];
+                if xp.y > 0.305 {
+                    continue;
+                }
+                let swept = Aabb::new(xp, xp).loosened(0.005);
+                match nearest_triangle(
+                    xp,
+                    &swept,
+                    &b0.boundary.grid,
+                    &b0.boundary.triangles,
+                    |j| b0.positions[j],
+                    |_| false,
+                ) {
+                    None => none += 1,
+                    Some(c) => {
+                        found += 1;
+                        let e = c.map(|j| b0.positions[j]);
+                        dists.push(surface_distance(xp, e).map(|r| r.0));
+                    }
+                }
+            }
+            println!(
+                "  none {none} found {found} d {:?}",
+                &dists[..dists.len().min(12)]
+            );
         }
     }
 }

@@ -88,6 +88,7 @@ impl SoftBodyState {
         let mut contacts = 0;
         for k in 0..plan.substeps {
             self.substep_motion(&plan, k);
+            self.substep_velocities(&plan);
             contacts += self.substep_contacts(&plan, k, spheres, colliders);
             self.substep_finish(&plan, spheres, parallel);
         }
@@ -200,8 +201,8 @@ impl SoftBodyState {
     }
 
     /// Substep `k`'s motion: gravity, the predicted positions, the shape solve (edges, or the
-    /// tets' shapes; for XPBD the tets' volumes too), and the velocities that motion gives,
-    /// with the particles back where the substep started.
+    /// tets' shapes; for XPBD the tets' volumes too). The particles are left where it takes
+    /// them; [`SoftBodyState::substep_velocities`] turns that into velocities.
     pub(crate) fn substep_motion(&mut self, plan: &SubstepPlan, k: u32) {
         let _ = k;
         let hs = plan.hs;
@@ -231,6 +232,13 @@ impl SoftBodyState {
         if plan.volumes {
             self.project_volumes();
         }
+    }
+
+    /// The velocities substep `k`'s motion gives (where the shape solve, and the contacts
+    /// between bodies in lockstep, took the particles), with the particles back where the
+    /// substep started.
+    pub(crate) fn substep_velocities(&mut self, plan: &SubstepPlan) {
+        let hs = plan.hs;
         // Velocities from the motion, then contacts on them from the substep's start.
         for i in 0..self.positions.len() {
             let v = (self.positions[i] - self.scratch.predicted[i].vec3()) / hs;
