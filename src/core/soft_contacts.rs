@@ -96,7 +96,8 @@ impl SoftBodyState {
     fn record_soft_contacts(&mut self) {
         for k in 0..self.scratch.soft_touched.len() {
             let (i, n) = self.scratch.soft_touched[k];
-            self.record_contact(i as usize, n, 0.0, None);
+            let kept = if std::env::var("KEPT1").is_ok() { 1.0 } else { 0.0 };
+            self.record_contact(i as usize, n, kept, None);
         }
     }
 
@@ -214,17 +215,47 @@ pub fn resolve_pair(
         &b.scratch.predicted,
     );
     let (ba, bb) = (&a.boundary, &b.boundary);
-    let contact = Contact {
-        phase,
-        thickness,
-        friction: mu,
-    };
     let (ta, tb) = (&mut a.scratch.soft_touched, &mut b.scratch.soft_touched);
     ta.clear();
     tb.clear();
+    let pairn = std::env::var("PAIRN").is_ok();
+    let mut n_ab = None;
+    if pairn {
+        let probe = Contact {
+            phase,
+            thickness,
+            friction: mu,
+            pair_normal: None,
+            probe: Some(std::cell::Cell::new(Vec3::ZERO)),
+        };
+        probe.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta);
+        let sum_a = probe.probe.as_ref().unwrap().replace(Vec3::ZERO);
+        probe.particles_against_triangles(&bb.particles, &pb, ba, &pa, None, &overlap, tb);
+        let sum_b = probe.probe.as_ref().unwrap().get();
+        n_ab = (sum_a - sum_b).try_normalize();
+        if std::env::var("VERT").is_ok() { n_ab = Some(if (sum_a - sum_b).y < 0.0 { -Vec3::Y } else { Vec3::Y }); }
+        if std::env::var("MOM").is_ok() { println!("pair normal {n_ab:?} phase {phase:?}"); }
+        ta.clear();
+        tb.clear();
+    }
+    let contact_a = Contact {
+        phase,
+        thickness,
+        friction: mu,
+        pair_normal: n_ab,
+        probe: None,
+    };
+    let contact_b = Contact {
+        phase,
+        thickness,
+        friction: mu,
+        pair_normal: n_ab.map(|n| -n),
+        probe: None,
+    };
+    let oneway = std::env::var("ONEWAY").is_ok();
     let contacts =
-        contact.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta)
-            + contact.particles_against_triangles(&bb.particles, &pb, ba, &pa, None, &overlap, tb);
+        (if oneway { 0 } else { contact_a.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta) })
+            + contact_b.particles_against_triangles(&bb.particles, &pb, ba, &pa, None, &overlap, tb);
     a.record_soft_contacts();
     b.record_soft_contacts();
     // A sleeping body touched by a moving one wakes; two sleeping ones stay as they are.
@@ -256,6 +287,8 @@ pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase) -> u32 {
         phase,
         thickness: settings.thickness,
         friction: body.material.friction,
+        pair_normal: None,
+        probe: None,
     };
     let boundary = &body.boundary;
     let rest = body.mesh.positions();
@@ -358,6 +391,10 @@ struct Contact {
     phase: SoftContactPhase,
     thickness: f32,
     friction: f32,
+    /// The pair's one normal, for this direction (pushes the particle along it).
+    pair_normal: Option<Vec3>,
+    /// When set, contacts are only summed here (depth times normal), not resolved.
+    probe: Option<std::cell::Cell<Vec3>>,
 }
 
 impl Contact {
@@ -398,23 +435,40 @@ impl Contact {
             }
             // The nearest triangle decides, as a signed distance would: a particle over the
             // top face near its edge is outside the body, whatever the side face's plane says.
-            let nearest = nearest_triangle(
-                xp,
-                &swept,
-                &boundary.grid,
-                &boundary.triangles,
-                |j| t.x.get(j) + ahead * t.v.get(j),
-                |tri| {
-                    rest.is_some_and(|rest| {
-                        if tri.contains(&(i as u32)) {
-                            return true;
-                        }
-                        let [a, b, c] = tri.map(|j| rest[j as usize]);
-                        let q = closest_barycentric(rest[i], a, b, c);
-                        (a * q.x + b * q.y + c * q.z).distance(rest[i]) < 2.0 * reach
-                    })
-                },
-            );
+            let self_skip = |tri: [u32; 3]| {
+                rest.is_some_and(|rest| {
+                    if tri.contains(&(i as u32)) {
+                        return true;
+                    }
+                    let [a, b, c] = tri.map(|j| rest[j as usize]);
+                    let q = closest_barycentric(rest[i], a, b, c);
+                    (a * q.x + b * q.y + c * q.z).distance(rest[i]) < 2.0 * reach
+                })
+            };
+            let came = std::env::var("CAME").is_ok();
+            let mut nearest = None;
+            if came {
+                nearest = nearest_triangle(
+                    xp,
+                    &swept,
+                    &boundary.grid,
+                    &boundary.triangles,
+                    |j| t.x.get(j) + ahead * t.v.get(j),
+                    |tri| {
+                        self_skip(tri) || !outside_of(x, tri.map(|j| t.x.get(j as usize)), thickness)
+                    },
+                );
+            }
+            if nearest.is_none() {
+                nearest = nearest_triangle(
+                    xp,
+                    &swept,
+                    &boundary.grid,
+                    &boundary.triangles,
+                    |j| t.x.get(j) + ahead * t.v.get(j),
+                    self_skip,
+                );
+            }
             if let Some(corners) = nearest
                 && let Some(n) = self.resolve(i, w_p, p, corners, t, reach)
             {
@@ -465,6 +519,23 @@ impl Contact {
             thickness - d
         } else {
             -d
+        };
+        if std::env::var("SIDE").is_ok() && self.probe.is_none() && n.x.abs() > 0.15 {
+            println!("side contact {:?} particle {i} x {x:.3} xp {xp:.3} n {n:.2} depth {depth:.4} q {q:.2}", self.phase);
+        }
+        if let Some(sum) = &self.probe {
+            sum.set(sum.get() + n * depth);
+            return None;
+        }
+        let (n, depth) = match self.pair_normal {
+            Some(pn) => {
+                let c = n.dot(pn);
+                if c < 0.5 {
+                    return None;
+                }
+                (pn, depth / c)
+            }
+            None => (n, depth),
         };
         if self.phase == SoftContactPhase::Substep {
             // Apart along the normal, then friction on the relative motion since the substep
@@ -858,7 +929,11 @@ mod debug_tests {
         let h = 1.0 / 60.0;
         for step in 0..240 {
             let c = step_bodies(&mut bodies, h, g, &ground, &Serial);
-            if step % 10 == 0 || (step > 3 && step < 12) {
+            if std::env::var("MOM").is_ok() && step < 80 {
+                let px: Vec3 = bodies[1].velocities().iter().zip(bodies[1].masses()).map(|(v, m)| *m * *v).sum();
+                println!("{step} upper momentum {px:.4}");
+            }
+            if step % 10 == 0 || (step > 3 && step < 12) || (std::env::var("FINE").is_ok() && step % 3 == 0 && step < 130) {
                 let n = bodies[0].substeps_needed(h, &[], &ground);
                 println!(
                     "{step} sub {n:?} c {c} centres {} {} vmax {:.3} {:.3} deepest {:.4} vol {:.2} {:.2}",
