@@ -890,7 +890,7 @@ mod debug_tests {
         let ground = [ColliderInstance::new(
             SharedShape::halfspace(Vec3::Y),
             Pose::IDENTITY,
-            0.8,
+            std::env::var("GMU").map(|v| v.parse().unwrap()).unwrap_or(0.8),
         )];
         let mk = |c: Vec3| {
             let size: f32 = std::env::var("SIZE")
@@ -902,7 +902,8 @@ mod debug_tests {
             let e: f32 = std::env::var("E")
                 .map(|v| v.parse().unwrap())
                 .unwrap_or(2e4);
-            let mut m = SoftBodyMaterial::elastic(1050.0, e, 0.01);
+            let damp: f32 = std::env::var("DAMP").map(|v| v.parse().unwrap()).unwrap_or(0.01);
+            let mut m = SoftBodyMaterial::elastic(1050.0, e, damp);
             if let Ok(f) = std::env::var("MU") {
                 m.friction = f.parse().unwrap();
             }
@@ -931,7 +932,8 @@ mod debug_tests {
             let c = step_bodies(&mut bodies, h, g, &ground, &Serial);
             if std::env::var("MOM").is_ok() && step < 80 {
                 let px: Vec3 = bodies[1].velocities().iter().zip(bodies[1].masses()).map(|(v, m)| *m * *v).sum();
-                println!("{step} upper momentum {px:.4}");
+                let p0: Vec3 = bodies[0].velocities().iter().zip(bodies[0].masses()).map(|(v, m)| *m * *v).sum();
+                println!("{step} upper momentum {px:.4} lower {p0:.4} total {:.4}", px + p0);
             }
             if step % 10 == 0 || (step > 3 && step < 12) || (std::env::var("FINE").is_ok() && step % 3 == 0 && step < 130) {
                 let n = bodies[0].substeps_needed(h, &[], &ground);
