@@ -540,6 +540,14 @@ impl Contact {
         if self.phase == SoftContactPhase::Substep {
             // Apart along the normal, then friction on the relative motion since the substep
             // started: held (static) if it is within `mu` times the push, else slowed by it.
+            let depth = if let Ok(hs) = std::env::var("BOUND").map(|v| v.parse::<f32>().unwrap()) {
+                let start_p = p.start[i].vec3();
+                let start_t = corners.map(|j| t.start[j].vec3());
+                let existing = surface_distance(start_p, start_t).map_or(0.0, |(d0, ..)| if d0.is_finite() { -d0 } else { 0.0 });
+                bounded_correction(depth, existing, hs)
+            } else {
+                depth
+            };
             let shift = depth / w;
             let moved = |k_shift: Vec3| {
                 p.x.set(i, p.x.get(i) + k_shift * w_p);
