@@ -219,10 +219,43 @@ impl SoftBodyState {
     /// seconds into the step (a substep's start) plus `h`, pushing the bodies back. Returns the
     /// number of contacts.
     pub(crate) fn resolve_rigid_contacts(&mut self, h: f32, elapsed: f32) -> u32 {
-        if self.rigid.colliders.is_empty() {
+        if self.rigid.colliders.is_empty() && self.rigid.attachments.is_empty() {
             return 0;
         }
         let mut rigid = std::mem::take(&mut self.rigid);
+        // Attached particles first: each is taken to its point of the body where both are
+        // predicted to be, sharing the impulse by inverse mass (the body's at that point), or
+        // pulled there by its spring (XPBD's compliance over the step's length). A body holding
+        // `n` particles shows each of them `n` times its inverse mass (mass splitting): one
+        // pass of `n` constraints that each took the body for theirs alone would move it `n`
+        // times too far, and a light beam holding a heavy bag would spin up.
+        for body in rigid.bodies.iter_mut() {
+            body.attached = 0;
+        }
+        for a in &rigid.attachments {
+            rigid.bodies[a.body as usize].attached += 1;
+        }
+        for a in &rigid.attachments {
+            let i = a.particle as usize;
+            let w = self.inv_masses[i];
+            let body = &mut rigid.bodies[a.body as usize];
+            let split = body.attached as f32;
+            let (target, r) = body.point_at(a.offset, elapsed + h);
+            let xp = self.positions[i] + h * self.velocities[i];
+            let gap = target - xp;
+            let distance = gap.length();
+            if distance <= 0.0 || !distance.is_finite() {
+                continue;
+            }
+            let n = gap / distance;
+            let inv_mass = w + split * body.inv_mass_along(r, n) + a.compliance / (h * h);
+            if inv_mass <= 0.0 {
+                continue;
+            }
+            let lambda = distance / h / inv_mass;
+            self.velocities[i] += n * (lambda * w);
+            body.apply_impulse(-n * lambda, r);
+        }
         let friction = self.material.friction;
         let filter = self.collision_filter;
         let mut contacts = 0;
@@ -448,12 +481,11 @@ mod tests {
         let rot = Mat3::from_quat(rotation);
         let centre = Vec3::new(0.3, 0.45, 0.2);
         let crate_motion = RigidBodyMotion {
-            centre_of_mass: centre,
             linear_velocity: Vec3::new(0.0, -2.0, 0.3),
             angular_velocity: Vec3::new(1.0, 0.0, -2.0),
             inv_mass: 1.0 / mass,
             inv_inertia: rot * Mat3::from_diagonal(inertia.recip()) * rot.transpose(),
-            gravity: Vec3::ZERO,
+            ..RigidBodyMotion::kinematic(centre, Vec3::ZERO, Vec3::ZERO)
         };
         let rigid = body.rigid_contacts_mut();
         rigid.bodies.push(crate_motion);
