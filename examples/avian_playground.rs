@@ -178,22 +178,14 @@ fn throw_crate(
     mut materials: ResMut<Assets<StandardMaterial>>,
     mut commands: Commands,
 ) {
-    if !keys.just_pressed(KeyCode::KeyT) {
-        return;
-    }
-    let Ok(eye) = camera.single() else {
-        return;
-    };
-    let wood = materials.add(StandardMaterial {
-        base_color: WOOD,
-        ..default()
-    });
-    commands.spawn((
-        crate_bundle(&mut meshes, wood),
-        Transform::from_translation(eye.translation + eye.forward() * 0.8),
-        LinearVelocity(eye.forward() * 7.0),
-        AngularVelocity(Vec3::new(1.0, 2.0, 0.5)),
-    ));
+    common::throw_crate(
+        &keys,
+        &camera,
+        &mut meshes,
+        &mut materials,
+        &mut commands,
+        (0.3, 8.0, 7.0),
+    );
 }
 
 /// R (or the common reset) spawns the scene anew.
@@ -206,13 +198,7 @@ fn reset(
     meshes: ResMut<Assets<Mesh>>,
     materials: ResMut<Assets<StandardMaterial>>,
 ) {
-    if !(keys.just_pressed(KeyCode::KeyR) || reset.0) {
-        return;
+    if common::clear_scene_on_reset(&keys, &mut reset, &members, &mut grab, &mut commands) {
+        spawn_scene(commands, meshes, materials);
     }
-    reset.0 = false;
-    grab.0 = None;
-    for entity in &members {
-        commands.entity(entity).despawn();
-    }
-    spawn_scene(commands, meshes, materials);
 }

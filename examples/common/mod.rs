@@ -602,3 +602,53 @@ pub fn grab(
         .insert(DrivenParticles::new(handle, particles));
     state.0 = Some((entity, handle, depth));
 }
+
+/// Whether R was pressed (or a reset asked for): then every [`SceneMember`] is despawned and
+/// any grab let go, and the example spawns its scene again.
+pub fn clear_scene_on_reset(
+    keys: &ButtonInput<KeyCode>,
+    reset: &mut ResetScene,
+    members: &Query<Entity, With<SceneMember>>,
+    grab: &mut Grab,
+    commands: &mut Commands,
+) -> bool {
+    if !(keys.just_pressed(KeyCode::KeyR) || reset.0) {
+        return false;
+    }
+    reset.0 = false;
+    grab.0 = None;
+    for entity in members {
+        commands.entity(entity).despawn();
+    }
+    true
+}
+
+/// T throws an avian crate (`size` metres, `mass` kilograms) from the camera at `speed`.
+#[cfg(feature = "avian")]
+pub fn throw_crate(
+    keys: &ButtonInput<KeyCode>,
+    camera: &Query<&Transform, With<Camera3d>>,
+    meshes: &mut Assets<Mesh>,
+    materials: &mut Assets<StandardMaterial>,
+    commands: &mut Commands,
+    (size, mass, speed): (f32, f32, f32),
+) {
+    use avian3d::prelude::{AngularVelocity, Collider, LinearVelocity, Mass, RigidBody};
+    if !keys.just_pressed(KeyCode::KeyT) {
+        return;
+    }
+    let Ok(eye) = camera.single() else {
+        return;
+    };
+    commands.spawn((
+        RigidBody::Dynamic,
+        Collider::cuboid(size, size, size),
+        Mass(mass),
+        Mesh3d(meshes.add(Cuboid::from_length(size))),
+        MeshMaterial3d(materials.add(StandardMaterial::from_color(Color::srgb(0.72, 0.52, 0.3)))),
+        Transform::from_translation(eye.translation + eye.forward() * 0.8),
+        LinearVelocity(eye.forward() * speed),
+        AngularVelocity(Vec3::new(1.0, 2.0, 0.5)),
+        SceneMember,
+    ));
+}
