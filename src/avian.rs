@@ -65,6 +65,36 @@ pub struct AvianBodies {
 /// Soft bodies among avian's rigid bodies (see the module's documentation). In
 /// [`SoftBodyPlugins`](crate::SoftBodyPlugins) when the `avian` feature is on; it goes after
 /// [`SoftBodyPlugin`](crate::SoftBodyPlugin), whose schedule it runs in.
+///
+/// A jelly bag hung from an avian beam by its top layer (the README's example), headless:
+///
+/// ```
+/// use avian3d::prelude::*;
+/// use bevy::prelude::*;
+/// use bevy_soft_body::avian::{SoftBodyAttachment, SoftBodyAvianPlugin};
+/// use bevy_soft_body::core::{ParticleRegion, box_grid};
+/// use bevy_soft_body::prelude::*;
+///
+/// fn setup(mut commands: Commands) {
+///     commands.spawn((RigidBody::Static, Collider::half_space(Vec3::Y)));
+///     let beam = (RigidBody::Static, Collider::cuboid(1.0, 0.1, 0.1), Transform::from_xyz(0.0, 2.0, 0.0));
+///     let beam = commands.spawn(beam).id();
+///     let mesh = box_grid(UVec3::splat(6), Vec3::splat(0.05), Vec3::new(-0.15, 1.6, -0.15)).unwrap();
+///     let top = mesh.particles_in(ParticleRegion::Box { min: Vec3::new(-1.0, 1.89, -1.0), max: Vec3::splat(3.0) });
+///     let bag = SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
+///     commands.spawn((bag, SoftBodyAttachment::hard(beam, top)));
+/// }
+///
+/// let mut app = App::new();
+/// app.add_plugins((MinimalPlugins, TransformPlugin, PhysicsPlugins::default()))
+///     .add_plugins((SoftBodyPlugin::default(), SoftBodyAvianPlugin))
+///     .add_systems(Startup, setup);
+/// app.finish();
+/// app.cleanup();
+/// for _ in 0..5 {
+///     app.update();
+/// }
+/// ```
 pub struct SoftBodyAvianPlugin;
 
 impl Plugin for SoftBodyAvianPlugin {
