@@ -363,7 +363,7 @@ fn a_rubber_cube_slides_down_a_slippery_tilted_box() {
             Friction::new(friction),
             Transform::from_translation(Vec3::new(0.0, 1.0, 0.0)).with_rotation(tilt),
         ));
-        let mut cube = SoftBody::new(
+        let cube = SoftBody::new(
             box_grid(UVec3::splat(4), Vec3::splat(0.05), Vec3::ZERO)
                 .unwrap()
                 .into(),
