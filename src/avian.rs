@@ -36,7 +36,7 @@ use crate::components::{SoftBody, SoftBodyError, SoftBodyErrorKind, SoftBodyGrav
 use crate::core::{
     ColliderInstance, CollisionFilter, RigidAttachment, RigidBodyMotion, RigidCollider,
 };
-use crate::plugin::{SoftBodySystems, SoftBodyTiming, SolverSpheres};
+use crate::plugin::{SoftBodySystems, SoftBodyTiming, SolverSpheres, report};
 
 /// A sleeping avian body is woken only by a change of its velocity above this (m/s, or rad/s):
 /// smaller pushes from a soft body at rest beneath it are rounding, not a disturbance.
@@ -324,11 +324,8 @@ fn attach(
     let Some(&k) = avian.index.get(&attachment.body) else {
         if !attachment.reported {
             attachment.reported = true;
-            report(
-                errors,
-                entity,
-                SoftBodyErrorKind::MissingDriveTarget(attachment.body),
-            );
+            let kind = SoftBodyErrorKind::MissingDriveTarget(attachment.body);
+            report(errors, SoftBodyError { body: entity, kind });
         }
         return;
     };
@@ -340,11 +337,8 @@ fn attach(
             match body.state.positions().get(i as usize) {
                 Some(&x) => attachment.anchors.push(rotation.inverse() * (x - origin)),
                 None => {
-                    report(
-                        errors,
-                        entity,
-                        SoftBodyErrorKind::ParticleOutOfRange { index: i, count },
-                    );
+                    let kind = SoftBodyErrorKind::ParticleOutOfRange { index: i, count };
+                    report(errors, SoftBodyError { body: entity, kind });
                     attachment.anchors.push(Vec3::ZERO);
                 }
             }
@@ -363,13 +357,6 @@ fn attach(
             });
         }
     }
-}
-
-/// Logs an error about soft body `body` and writes it as a message.
-fn report(errors: &mut MessageWriter<SoftBodyError>, body: Entity, kind: SoftBodyErrorKind) {
-    let error = SoftBodyError { body, kind };
-    error!("{error}");
-    errors.write(error);
 }
 
 /// Particles of a soft body attached to an avian rigid body (put it on the soft body): held on

@@ -10,6 +10,7 @@ use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::avian::{SoftBodyAttachment, SoftBodyAvianPlugin};
 use bevy_soft_body::core::{ParticleRegion, TetMesh, box_grid};
 use bevy_soft_body::prelude::*;
+use bevy_soft_body::{SoftBodyError, SoftBodyErrorKind};
 use glam::{Mat3, UVec3};
 
 fn app(gravity: Vec3, max_threads: usize) -> App {
@@ -432,4 +433,63 @@ fn a_jelly_rides_a_moving_platform() {
     );
     assert!(centre(&app, body).y > 0.6, "the jelly fell off or sank");
     println!("platform {platform_moved} m, jelly {jelly_moved} m in 0.6 s");
+}
+
+/// An attachment to an entity that is not an avian body, and one naming a particle the body
+/// does not have, are reported once each as errors naming what is wrong; nothing panics and
+/// the bodies go on (the valid particles of the second stay attached).
+#[test]
+fn bad_attachments_are_reported_not_panicked() {
+    let mut app = app(Vec3::new(0.0, -9.81, 0.0), usize::MAX);
+    let not_a_body = app.world_mut().spawn(Transform::default()).id();
+    let hook = app
+        .world_mut()
+        .spawn((RigidBody::Static, Transform::from_xyz(0.0, 2.0, 0.0)))
+        .id();
+    let lost = app
+        .world_mut()
+        .spawn((
+            jelly(0.2, Vec3::new(-2.0, 1.0, 0.0)),
+            SoftBodyAttachment::hard(not_a_body, vec![0]),
+        ))
+        .id();
+    let hung = app
+        .world_mut()
+        .spawn((
+            jelly(0.2, Vec3::new(2.0, 1.8, 0.0)),
+            SoftBodyAttachment::hard(hook, vec![0, 1_000_000]),
+        ))
+        .id();
+    let mut reported = Vec::new();
+    for _ in 0..30 {
+        app.update();
+        let messages = app.world().resource::<Messages<SoftBodyError>>();
+        reported.extend(messages.iter_current_update_messages().cloned());
+    }
+    assert_eq!(reported.len(), 2, "{reported:?}");
+    assert!(reported.iter().any(|e| e.body == lost
+        && matches!(e.kind, SoftBodyErrorKind::MissingDriveTarget(t) if t == not_a_body)));
+    assert!(reported.iter().any(|e| e.body == hung
+        && matches!(
+            e.kind,
+            SoftBodyErrorKind::ParticleOutOfRange {
+                index: 1_000_000,
+                ..
+            }
+        )));
+    // Particle 0 of the hung jelly is still where it was attached; the lost one fell.
+    let held = app
+        .world()
+        .get::<SoftBody>(hung)
+        .unwrap()
+        .state()
+        .positions()[0];
+    assert!(
+        held.distance(Vec3::new(2.0, 1.8, 0.0)) < 1e-2,
+        "particle 0 at {held}"
+    );
+    assert!(
+        centre(&app, lost).y < 0.9,
+        "the unattached jelly did not fall"
+    );
 }
