@@ -217,6 +217,7 @@ fn gather_avian(
             (v.0, w.0)
         };
         let mut motion = RigidBodyMotion::kinematic(position.0 + rotation.0 * com.0, v, w);
+        motion.asleep = sleeping;
         if dynamic {
             motion.inv_mass = mass.inverse();
             motion.inv_inertia = turn * inertia.inverse().to_mat3() * turn.transpose();

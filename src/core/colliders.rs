@@ -194,6 +194,9 @@ pub struct RigidBodyMotion {
     /// in `linear_velocity`: a soft body solved in substeps hands it out per substep, as to
     /// its particles, so that a body resting on it is held by the same substeps.
     pub gravity: Vec3,
+    /// Whether the other engine has put the body to sleep: it wakes if a contact changes its
+    /// velocity enough, but does not keep a soft body under it awake.
+    pub asleep: bool,
     /// How many particles are attached to the body in this pass (scratch of the contacts).
     pub(crate) attached: u32,
 }
@@ -208,6 +211,7 @@ impl RigidBodyMotion {
             inv_mass: 0.0,
             inv_inertia: Mat3::ZERO,
             gravity: Vec3::ZERO,
+            asleep: false,
             attached: 0,
         }
     }
@@ -306,10 +310,14 @@ impl RigidContacts {
         self.attachments.clear();
     }
 
-    /// Whether any body here could push the soft body or be pushed by it.
+    /// Whether any body here could push the soft body or be pushed by it (a sleeping one
+    /// cannot, until something wakes it).
     pub(crate) fn any_moving(&self) -> bool {
         self.bodies.iter().any(|b| {
-            b.inv_mass > 0.0 || b.linear_velocity != Vec3::ZERO || b.angular_velocity != Vec3::ZERO
+            !b.asleep
+                && (b.inv_mass > 0.0
+                    || b.linear_velocity != Vec3::ZERO
+                    || b.angular_velocity != Vec3::ZERO)
         })
     }
 
