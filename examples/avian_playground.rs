@@ -12,7 +12,9 @@ use bevy_soft_body::avian::SoftBodyAvianPlugin;
 use bevy_soft_body::core::{TetMesh, box_grid};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::surface_mesh;
-use common::{ExampleOptions, ExtraHelp, Grab, OrbitCamera, ResetScene, SceneMember, grab};
+use common::{
+    ExampleOptions, ExtraHelp, Grab, OrbitCamera, SceneMember, ThrownCrate, grab, throw_crate,
+};
 
 fn main() -> AppExit {
     let mut app = common::example_app_with(
@@ -27,7 +29,15 @@ fn main() -> AppExit {
         ]))
         .add_systems(Startup, spawn_scene)
         .add_systems(PostStartup, frame_scene)
-        .add_systems(Update, (throw_crate, grab, reset));
+        .insert_resource(ThrownCrate {
+            size: 0.3,
+            mass: 8.0,
+            speed: 7.0,
+        })
+        .add_systems(
+            Update,
+            (throw_crate, grab, common::respawn_on_reset(spawn_scene)),
+        );
     app.run()
 }
 
@@ -168,37 +178,5 @@ fn frame_scene(mut camera: Query<(&mut OrbitCamera, &mut Transform)>) {
         orbit.pitch = 0.35;
         orbit.yaw = 0.2;
         *transform = orbit.transform();
-    }
-}
-
-fn throw_crate(
-    keys: Res<ButtonInput<KeyCode>>,
-    camera: Query<&Transform, With<Camera3d>>,
-    mut meshes: ResMut<Assets<Mesh>>,
-    mut materials: ResMut<Assets<StandardMaterial>>,
-    mut commands: Commands,
-) {
-    common::throw_crate(
-        &keys,
-        &camera,
-        &mut meshes,
-        &mut materials,
-        &mut commands,
-        (0.3, 8.0, 7.0),
-    );
-}
-
-/// R (or the common reset) spawns the scene anew.
-fn reset(
-    keys: Res<ButtonInput<KeyCode>>,
-    mut reset: ResMut<ResetScene>,
-    members: Query<Entity, With<SceneMember>>,
-    mut grab: ResMut<Grab>,
-    mut commands: Commands,
-    meshes: ResMut<Assets<Mesh>>,
-    materials: ResMut<Assets<StandardMaterial>>,
-) {
-    if common::clear_scene_on_reset(&keys, &mut reset, &members, &mut grab, &mut commands) {
-        spawn_scene(commands, meshes, materials);
     }
 }

@@ -623,15 +623,47 @@ pub fn clear_scene_on_reset(
     true
 }
 
-/// T throws an avian crate (`size` metres, `mass` kilograms) from the camera at `speed`.
+/// What an example spawns its scene with (for [`respawn_on_reset`]).
+pub type SpawnScene = fn(Commands, ResMut<Assets<Mesh>>, ResMut<Assets<StandardMaterial>>);
+
+/// A system that spawns the scene anew with `spawn` when R is pressed (or a reset asked for).
+#[allow(clippy::type_complexity)]
+pub fn respawn_on_reset(
+    spawn: SpawnScene,
+) -> impl FnMut(
+    Res<ButtonInput<KeyCode>>,
+    ResMut<ResetScene>,
+    Query<Entity, With<SceneMember>>,
+    ResMut<Grab>,
+    Commands,
+    ResMut<Assets<Mesh>>,
+    ResMut<Assets<StandardMaterial>>,
+) {
+    move |keys, mut reset, members, mut grab, mut commands, meshes, materials| {
+        if clear_scene_on_reset(&keys, &mut reset, &members, &mut grab, &mut commands) {
+            spawn(commands, meshes, materials);
+        }
+    }
+}
+
+/// The crate T throws from the camera in the avian examples: edge (m), mass (kg), speed (m/s).
+#[cfg(feature = "avian")]
+#[derive(Resource, Clone, Copy)]
+pub struct ThrownCrate {
+    pub size: f32,
+    pub mass: f32,
+    pub speed: f32,
+}
+
+/// T throws a [`ThrownCrate`] (an avian body) from the camera.
 #[cfg(feature = "avian")]
 pub fn throw_crate(
-    keys: &ButtonInput<KeyCode>,
-    camera: &Query<&Transform, With<Camera3d>>,
-    meshes: &mut Assets<Mesh>,
-    materials: &mut Assets<StandardMaterial>,
-    commands: &mut Commands,
-    (size, mass, speed): (f32, f32, f32),
+    keys: Res<ButtonInput<KeyCode>>,
+    thrown: Res<ThrownCrate>,
+    camera: Query<&Transform, With<Camera3d>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut commands: Commands,
 ) {
     use avian3d::prelude::{AngularVelocity, Collider, LinearVelocity, Mass, RigidBody};
     if !keys.just_pressed(KeyCode::KeyT) {
@@ -640,14 +672,15 @@ pub fn throw_crate(
     let Ok(eye) = camera.single() else {
         return;
     };
+    let size = thrown.size;
     commands.spawn((
         RigidBody::Dynamic,
         Collider::cuboid(size, size, size),
-        Mass(mass),
+        Mass(thrown.mass),
         Mesh3d(meshes.add(Cuboid::from_length(size))),
         MeshMaterial3d(materials.add(StandardMaterial::from_color(Color::srgb(0.72, 0.52, 0.3)))),
         Transform::from_translation(eye.translation + eye.forward() * 0.8),
-        LinearVelocity(eye.forward() * speed),
+        LinearVelocity(eye.forward() * thrown.speed),
         AngularVelocity(Vec3::new(1.0, 2.0, 0.5)),
         SceneMember,
     ));
