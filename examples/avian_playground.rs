@@ -49,20 +49,9 @@ fn spawn_scene(
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
 ) {
-    let grey = materials.add(StandardMaterial {
-        base_color: Color::srgb(0.55, 0.57, 0.6),
-        perceptual_roughness: 0.8,
-        ..default()
-    });
+    let grey = common::fixture_material(&mut materials);
     // The ground and a ramp, avian's static colliders.
-    commands.spawn((
-        RigidBody::Static,
-        Collider::half_space(Vec3::Y),
-        Mesh3d(meshes.add(Plane3d::default().mesh().size(12.0, 12.0))),
-        MeshMaterial3d(grey.clone()),
-        Transform::default(),
-        SceneMember,
-    ));
+    common::spawn_avian_ground(&mut commands, &mut meshes, grey.clone(), 12.0);
     let ramp = Vec3::new(2.4, 0.15, 1.4);
     commands.spawn((
         RigidBody::Static,

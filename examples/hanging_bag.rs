@@ -54,19 +54,8 @@ fn spawn_scene(
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
 ) {
-    let grey = materials.add(StandardMaterial {
-        base_color: Color::srgb(0.55, 0.57, 0.6),
-        perceptual_roughness: 0.8,
-        ..default()
-    });
-    commands.spawn((
-        RigidBody::Static,
-        Collider::half_space(Vec3::Y),
-        Mesh3d(meshes.add(Plane3d::default().mesh().size(10.0, 10.0))),
-        MeshMaterial3d(grey.clone()),
-        Transform::default(),
-        SceneMember,
-    ));
+    let grey = common::fixture_material(&mut materials);
+    common::spawn_avian_ground(&mut commands, &mut meshes, grey.clone(), 10.0);
     // The post and the hinge at its top.
     let post = commands
         .spawn((

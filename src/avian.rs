@@ -367,9 +367,8 @@ fn attach(
 /// [`TetMesh::particles_in`](crate::core::TetMesh::particles_in).
 ///
 /// The coupling is partitioned: the soft step pulls the body, then avian solves the body's own
-/// joints and contacts. A dynamic body much lighter than the soft mass it carries can then
-/// oscillate and blow up (a 3 kg beam holding a 57 kg bag by a dozen particles did; a 2 kg beam
-/// holding an 8 kg bag by 49 did not): give such a body a realistic mass, or attach more
+/// joints and contacts. A dynamic body much lighter than the soft mass it carries by a few
+/// particles can then oscillate and blow up: give such a body a realistic mass, or attach more
 /// particles. A body that runs away is caught and reported as any other.
 #[derive(Component, Clone, Debug)]
 pub struct SoftBodyAttachment {

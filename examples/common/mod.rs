@@ -646,6 +646,35 @@ pub fn respawn_on_reset(
     }
 }
 
+/// The grey of the avian examples' static ground and fixtures.
+#[cfg(feature = "avian")]
+pub fn fixture_material(materials: &mut Assets<StandardMaterial>) -> Handle<StandardMaterial> {
+    materials.add(StandardMaterial {
+        base_color: Color::srgb(0.55, 0.57, 0.6),
+        perceptual_roughness: 0.8,
+        ..default()
+    })
+}
+
+/// An avian ground (a static half-space), drawn as a `size` metre square of `material`.
+#[cfg(feature = "avian")]
+pub fn spawn_avian_ground(
+    commands: &mut Commands,
+    meshes: &mut Assets<Mesh>,
+    material: Handle<StandardMaterial>,
+    size: f32,
+) {
+    use avian3d::prelude::{Collider, RigidBody};
+    commands.spawn((
+        RigidBody::Static,
+        Collider::half_space(Vec3::Y),
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(size, size))),
+        MeshMaterial3d(material),
+        Transform::default(),
+        SceneMember,
+    ));
+}
+
 /// The crate T throws from the camera in the avian examples: edge (m), mass (kg), speed (m/s).
 #[cfg(feature = "avian")]
 #[derive(Resource, Clone, Copy)]
