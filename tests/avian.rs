@@ -350,11 +350,9 @@ fn centre(app: &App, body: Entity) -> Vec3 {
 /// A rubber cube on an avian box tilted by 30 degrees slides down it when the pair's friction
 /// (avian's `Friction` on the collider combined with the material's, geometric mean) is below
 /// tan 30 = 0.58: from rest it gains about `g (sin 30 - 0.1 cos 30) = 4.06 m/s^2`, some 2 m in
-/// the second (from 60 % to 120 % of that). (With friction 1.2 it should stay; it creeps down at about 0.3 m/s, a defect of
-/// the core's static friction on slopes, not of the avian glue: the same happens against a
-/// tilted half-space without avian.)
+/// the second (from 60 % to 120 % of that). With friction 1.2 it stays.
 #[test]
-fn a_rubber_cube_slides_down_a_slippery_tilted_box() {
+fn a_rubber_cube_slides_down_a_slippery_tilted_box_and_stays_on_a_rough_one() {
     let slide = |friction: f32| {
         let mut app = app(Vec3::new(0.0, -9.81, 0.0), usize::MAX);
         let tilt = Quat::from_rotation_z(-30f32.to_radians());
@@ -394,7 +392,12 @@ fn a_rubber_cube_slides_down_a_slippery_tilted_box() {
         (1.2..2.4).contains(&icy),
         "on a slippery box the cube slid {icy} m in 1 s"
     );
-    println!("slid {icy} m in 1 s (friction 0.1)");
+    let rough = slide(1.2);
+    assert!(
+        rough.abs() < 0.02,
+        "on a rough box the cube slid {rough} m in 1 s"
+    );
+    println!("slid {icy} m in 1 s (friction 0.1), {rough} m (friction 1.2)");
 }
 
 /// A jelly on a kinematic avian platform moving sideways at 1 m/s rides along with it

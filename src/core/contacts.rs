@@ -26,7 +26,9 @@
 //! (see `static_friction`): with velocity-only friction the volume impulses' small pushes at
 //! a resting body's base, each stopped by friction only while it pressed into the ground, made
 //! the body walk across the ground and never come to rest (PERFORMANCE.md, stop 30). Against a
-//! sphere, friction is Coulomb's on the relative velocity.
+//! sphere, friction is Coulomb's on the relative velocity. The ground's push that the volume
+//! impulses meet (their pushes into it that `constrain_direction` takes out) is a normal force
+//! too, and gets its friction after them (`support_friction`).
 
 use glam::Vec3;
 use parry3d::bounding_volume::Aabb;
@@ -102,6 +104,7 @@ impl SoftBodyState {
         let kept = unsafe { SharedSlice::new(&mut self.contact_kept) };
         let sphere = unsafe { SharedSlice::new(&mut self.contact_sphere) };
         let anchors = unsafe { SharedSlice::new(&mut self.friction_anchors) };
+        let static_contact = unsafe { SharedSlice::new(&mut self.scratch.static_contact) };
         in_particle_chunks(
             parallel,
             &mut self.scratch.chunk_findings,
@@ -112,6 +115,7 @@ impl SoftBodyState {
                         continue;
                     }
                     let mut touched = false;
+                    static_contact.set(i, [0.0; 2]);
                     for c in colliders {
                         if !filter.interacts_with(c.filter) {
                             continue;
@@ -128,6 +132,7 @@ impl SoftBodyState {
                             static_friction(x, v, normal, depth, mu, h, anchors.get(i));
                         velocities.set(i, v);
                         anchors.set(i, anchor);
+                        static_contact.set(i, [depth, mu]);
                         // As `record_contact`, with the new ones listed by the job.
                         if normals.get(i) == Vec3::ZERO {
                             found.new_touching.push(i as u32);
@@ -150,6 +155,41 @@ impl SoftBodyState {
             contacts += std::mem::take(&mut found.contacts);
         }
         contacts
+    }
+
+    /// Coulomb friction for the push the static colliders gave a substep's volume impulses:
+    /// `push` is the impulses' net change of momentum, which is not zero only because
+    /// `constrain_direction` took out their pushes into what the particles touch. The volume
+    /// impulses carry much of a resting body's weight that way, so friction counted on the
+    /// contact pass's push alone lets a body slide down a slope its friction should hold.
+    /// `push` is shared out over the particles in static contact in proportion to their
+    /// contact pass's push (mass times depth), and each loses tangential velocity `v` up to
+    /// its friction coefficient times its share over its mass. Returns the change of velocity.
+    pub(crate) fn support_friction(
+        &self,
+        push: Vec3,
+        total_weight: f32,
+        i: usize,
+        v: Vec3,
+    ) -> Vec3 {
+        let [depth, mu] = self.scratch.static_contact[i];
+        if depth <= 0.0 || total_weight <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let n = self.contact_normals[i];
+        let share = push.dot(n).max(0.0) * depth / total_weight;
+        friction_change(v - n * v.dot(n), mu * share)
+    }
+
+    /// The weight `support_friction` shares the push out by: the particles' mass times depth
+    /// in the static colliders, summed.
+    pub(crate) fn static_contact_weight(&self) -> f32 {
+        self.scratch
+            .static_contact
+            .iter()
+            .zip(&self.masses)
+            .map(|(&[depth, _], &m)| m * depth)
+            .sum()
     }
 
     /// Pushes predicted positions out of the (predicted) rigid spheres, pushing the spheres
