@@ -397,14 +397,13 @@ fn slide_on_slope(
     (body.centre_of_mass() - start).dot(down)
 }
 
-/// Friction holds a body on a slope it should hold: rubber and flesh cubes on 25 degrees (tan 25
-/// = 0.47) with friction 1.2 move less than 2 cm in two seconds at 30 to 120 Hz, and the rubber
-/// one on 30 degrees at 60 and 120 Hz, on the crate's grid and on a jittered mesh. The volume impulses carry much of a resting body's
-/// weight, and their share of the ground's push gets its friction too
-/// (`SoftBodyState::support_friction`); without it they slid 0.1 to 1.8 m. (At 30 Hz, and for
-/// flesh on 30 degrees, the cube still tips over its lower edge: one shape projection per
-/// substep of 1/240 s does not carry the friction's torque through the body; substeps of
-/// 1/480 s hold it.) On friction 0.1 the rubber cube slides as Coulomb says.
+/// Friction holds a body on a slope it should hold: rubber and flesh cubes on 25 degrees
+/// (tan 25 = 0.47) with friction 1.2 move less than 2 cm in two seconds at 30 to 120 Hz, and
+/// the rubber one on 30 degrees at 60 and 120 Hz, on the crate's grid and on a jittered mesh.
+/// The volume impulses carry much of a resting body's weight, and their share of the ground's
+/// push gets its friction too (`SoftBodyState::support_friction`). (At 30 Hz, and for flesh on
+/// 30 degrees, the cube still tips over its lower edge; see PERFORMANCE.md.) On friction 0.1 the
+/// rubber cube slides as Coulomb says.
 #[test]
 fn friction_holds_a_body_on_a_slope_and_a_slippery_slope_lets_it_slide() {
     for hz in RATES {
