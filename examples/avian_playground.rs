@@ -12,7 +12,9 @@ use bevy_soft_body::avian::SoftBodyAvianPlugin;
 use bevy_soft_body::core::{TetMesh, box_grid};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::surface_mesh;
-use common::{ExampleOptions, ExtraHelp, Grab, OrbitCamera, ResetScene, SceneMember, grab};
+use common::{
+    ExampleOptions, ExtraHelp, Grab, OrbitCamera, SceneMember, ThrownCrate, grab, throw_crate,
+};
 
 fn main() -> AppExit {
     let mut app = common::example_app_with(
@@ -27,7 +29,15 @@ fn main() -> AppExit {
         ]))
         .add_systems(Startup, spawn_scene)
         .add_systems(PostStartup, frame_scene)
-        .add_systems(Update, (throw_crate, grab, reset));
+        .insert_resource(ThrownCrate {
+            size: 0.3,
+            mass: 8.0,
+            speed: 7.0,
+        })
+        .add_systems(
+            Update,
+            (throw_crate, grab, common::respawn_on_reset(spawn_scene)),
+        );
     app.run()
 }
 
@@ -39,20 +49,9 @@ fn spawn_scene(
     mut meshes: ResMut<Assets<Mesh>>,
     mut materials: ResMut<Assets<StandardMaterial>>,
 ) {
-    let grey = materials.add(StandardMaterial {
-        base_color: Color::srgb(0.55, 0.57, 0.6),
-        perceptual_roughness: 0.8,
-        ..default()
-    });
+    let grey = common::fixture_material(&mut materials);
     // The ground and a ramp, avian's static colliders.
-    commands.spawn((
-        RigidBody::Static,
-        Collider::half_space(Vec3::Y),
-        Mesh3d(meshes.add(Plane3d::default().mesh().size(12.0, 12.0))),
-        MeshMaterial3d(grey.clone()),
-        Transform::default(),
-        SceneMember,
-    ));
+    common::spawn_avian_ground(&mut commands, &mut meshes, grey.clone(), 12.0);
     let ramp = Vec3::new(2.4, 0.15, 1.4);
     commands.spawn((
         RigidBody::Static,
@@ -169,50 +168,4 @@ fn frame_scene(mut camera: Query<(&mut OrbitCamera, &mut Transform)>) {
         orbit.yaw = 0.2;
         *transform = orbit.transform();
     }
-}
-
-fn throw_crate(
-    keys: Res<ButtonInput<KeyCode>>,
-    camera: Query<&Transform, With<Camera3d>>,
-    mut meshes: ResMut<Assets<Mesh>>,
-    mut materials: ResMut<Assets<StandardMaterial>>,
-    mut commands: Commands,
-) {
-    if !keys.just_pressed(KeyCode::KeyT) {
-        return;
-    }
-    let Ok(eye) = camera.single() else {
-        return;
-    };
-    let wood = materials.add(StandardMaterial {
-        base_color: WOOD,
-        ..default()
-    });
-    commands.spawn((
-        crate_bundle(&mut meshes, wood),
-        Transform::from_translation(eye.translation + eye.forward() * 0.8),
-        LinearVelocity(eye.forward() * 7.0),
-        AngularVelocity(Vec3::new(1.0, 2.0, 0.5)),
-    ));
-}
-
-/// R (or the common reset) spawns the scene anew.
-fn reset(
-    keys: Res<ButtonInput<KeyCode>>,
-    mut reset: ResMut<ResetScene>,
-    members: Query<Entity, With<SceneMember>>,
-    mut grab: ResMut<Grab>,
-    mut commands: Commands,
-    meshes: ResMut<Assets<Mesh>>,
-    materials: ResMut<Assets<StandardMaterial>>,
-) {
-    if !(keys.just_pressed(KeyCode::KeyR) || reset.0) {
-        return;
-    }
-    reset.0 = false;
-    grab.0 = None;
-    for entity in &members {
-        commands.entity(entity).despawn();
-    }
-    spawn_scene(commands, meshes, materials);
 }

@@ -28,13 +28,15 @@ use avian3d::prelude::*;
 use bevy::ecs::schedule::{InternedScheduleLabel, ScheduleLabel};
 use bevy::platform::collections::HashMap;
 use bevy::prelude::*;
-use glam::Mat3;
+use glam::{Mat3, Quat};
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 use parry3d::math::Pose;
 
-use crate::components::{SoftBody, SoftBodyGravity};
-use crate::core::{ColliderInstance, CollisionFilter, RigidBodyMotion, RigidCollider};
-use crate::plugin::{SoftBodySystems, SoftBodyTiming, SolverSpheres};
+use crate::components::{SoftBody, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity};
+use crate::core::{
+    ColliderInstance, CollisionFilter, RigidAttachment, RigidBodyMotion, RigidCollider,
+};
+use crate::plugin::{SoftBodySystems, SoftBodyTiming, SolverSpheres, report};
 
 /// A sleeping avian body is woken only by a change of its velocity above this (m/s, or rad/s):
 /// smaller pushes from a soft body at rest beneath it are rounding, not a disturbance.
@@ -49,6 +51,11 @@ pub struct AvianBodies {
     start: Vec<RigidBodyMotion>,
     /// Whether each was asleep.
     sleeping: Vec<bool>,
+    /// Whether each is static (its colliders are met as static colliders; it is listed for
+    /// attachments).
+    fixed: Vec<bool>,
+    /// Each body's origin and rotation (avian's `Position` and `Rotation`).
+    poses: Vec<(Vec3, Quat)>,
     /// The dynamic and kinematic bodies' colliders, with their world bounds over the step.
     colliders: Vec<(RigidCollider, Aabb)>,
     /// Body entity to index, rebuilt each step.
@@ -58,6 +65,36 @@ pub struct AvianBodies {
 /// Soft bodies among avian's rigid bodies (see the module's documentation). In
 /// [`SoftBodyPlugins`](crate::SoftBodyPlugins) when the `avian` feature is on; it goes after
 /// [`SoftBodyPlugin`](crate::SoftBodyPlugin), whose schedule it runs in.
+///
+/// A jelly bag hung from an avian beam by its top layer (the README's example), headless:
+///
+/// ```
+/// use avian3d::prelude::*;
+/// use bevy::prelude::*;
+/// use bevy_soft_body::avian::{SoftBodyAttachment, SoftBodyAvianPlugin};
+/// use bevy_soft_body::core::{ParticleRegion, box_grid};
+/// use bevy_soft_body::prelude::*;
+///
+/// fn setup(mut commands: Commands) {
+///     commands.spawn((RigidBody::Static, Collider::half_space(Vec3::Y)));
+///     let beam = (RigidBody::Static, Collider::cuboid(1.0, 0.1, 0.1), Transform::from_xyz(0.0, 2.0, 0.0));
+///     let beam = commands.spawn(beam).id();
+///     let mesh = box_grid(UVec3::splat(6), Vec3::splat(0.05), Vec3::new(-0.15, 1.6, -0.15)).unwrap();
+///     let top = mesh.particles_in(ParticleRegion::Box { min: Vec3::new(-1.0, 1.89, -1.0), max: Vec3::splat(3.0) });
+///     let bag = SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
+///     commands.spawn((bag, SoftBodyAttachment::hard(beam, top)));
+/// }
+///
+/// let mut app = App::new();
+/// app.add_plugins((MinimalPlugins, TransformPlugin, PhysicsPlugins::default()))
+///     .add_plugins((SoftBodyPlugin::default(), SoftBodyAvianPlugin))
+///     .add_systems(Startup, setup);
+/// app.finish();
+/// app.cleanup();
+/// for _ in 0..5 {
+///     app.update();
+/// }
+/// ```
 pub struct SoftBodyAvianPlugin;
 
 impl Plugin for SoftBodyAvianPlugin {
@@ -150,13 +187,21 @@ fn gather_avian(
     mut solver: ResMut<SolverSpheres>,
     rigid_bodies: Query<AvianRigidBody, Without<RigidBodyDisabled>>,
     colliders: Query<AvianCollider, MetColliders>,
-    mut soft: Query<(&mut SoftBody, Option<&CollisionLayers>)>,
+    mut soft: Query<(
+        Entity,
+        &mut SoftBody,
+        Option<&CollisionLayers>,
+        Option<&mut SoftBodyAttachment>,
+    )>,
+    mut errors: MessageWriter<SoftBodyError>,
 ) {
     let h = time.delta_secs();
     let avian = &mut *avian;
     avian.entities.clear();
     avian.start.clear();
     avian.sleeping.clear();
+    avian.fixed.clear();
+    avian.poses.clear();
     avian.colliders.clear();
     avian.index.clear();
     solver.rigid.clear();
@@ -164,12 +209,15 @@ fn gather_avian(
     for (entity, kind, position, rotation, v, w, mass, inertia, com, scale, sleeping) in
         &rigid_bodies
     {
-        if kind.is_static() {
-            continue;
-        }
         let dynamic = kind.is_dynamic();
         let turn = Mat3::from_quat(rotation.0);
-        let mut motion = RigidBodyMotion::kinematic(position.0 + rotation.0 * com.0, v.0, w.0);
+        let (v, w) = if kind.is_static() {
+            (Vec3::ZERO, Vec3::ZERO)
+        } else {
+            (v.0, w.0)
+        };
+        let mut motion = RigidBodyMotion::kinematic(position.0 + rotation.0 * com.0, v, w);
+        motion.asleep = sleeping;
         if dynamic {
             motion.inv_mass = mass.inverse();
             motion.inv_inertia = turn * inertia.inverse().to_mat3() * turn.transpose();
@@ -182,6 +230,8 @@ fn gather_avian(
         avian.entities.push(entity);
         avian.start.push(motion);
         avian.sleeping.push(sleeping);
+        avian.fixed.push(kind.is_static());
+        avian.poses.push((position.0, rotation.0));
     }
     solver.rigid.extend_from_slice(&avian.start);
     let default_friction = default_friction.map_or(0.5, |f| f.dynamic_coefficient);
@@ -189,7 +239,9 @@ fn gather_avian(
         let friction = friction.map_or(default_friction, |f| f.dynamic_coefficient);
         let filter = filter_of(layers);
         let shape = collider.shape_scaled().clone();
-        let on_body = of.and_then(|of| Some((*avian.index.get(&of.body)?, of.body)));
+        let on_body = of
+            .and_then(|of| Some((*avian.index.get(&of.body)?, of.body)))
+            .filter(|&(k, _)| !avian.fixed[k as usize]);
         match (on_body, local) {
             (Some((k, body)), Some(local)) => {
                 let Ok((_, _, position, rotation, ..)) = rigid_bodies.get(body) else {
@@ -222,33 +274,139 @@ fn gather_avian(
             }
         }
     }
-    for (mut body, layers) in &mut soft {
+    for (entity, mut body, layers, attachment) in &mut soft {
         let body = &mut *body;
         let filter = filter_of(layers);
         body.state.set_collision_filter(filter);
         // Room for the speed the step's gravity and contacts may add.
         let reach = body.state.swept_bounds(h).map(|b| b.loosened(h * 5.0));
-        let rigid = body.state.rigid_contacts_mut();
-        rigid.clear();
+        body.state.rigid_contacts_mut().clear();
         body.rigid_ids.clear();
-        let Some(reach) = reach.filter(|_| body.placed && !avian.colliders.is_empty()) else {
+        if !body.placed {
             continue;
-        };
-        for (collider, bounds) in &avian.colliders {
-            if !filter.interacts_with(collider.filter) || !bounds.intersects(&reach) {
-                continue;
-            }
-            let local = match body.rigid_ids.iter().position(|&id| id == collider.body) {
-                Some(local) => local,
-                None => {
-                    body.rigid_ids.push(collider.body);
-                    rigid.bodies.push(avian.start[collider.body as usize]);
-                    rigid.bodies.len() - 1
+        }
+        if let Some(reach) = reach {
+            for (collider, bounds) in &avian.colliders {
+                if !filter.interacts_with(collider.filter) || !bounds.intersects(&reach) {
+                    continue;
                 }
-            };
-            let mut collider = collider.clone();
-            collider.body = local as u32;
-            rigid.colliders.push(collider);
+                let local = local_body(body, avian, collider.body);
+                let mut collider = collider.clone();
+                collider.body = local;
+                body.state.rigid_contacts_mut().colliders.push(collider);
+            }
+        }
+        if let Some(mut attachment) = attachment {
+            attach(entity, body, &mut attachment, avian, &mut errors);
+        }
+    }
+}
+
+/// The index in `body`'s `RigidContacts` of avian body `k`, added if it is not there yet.
+fn local_body(body: &mut SoftBody, avian: &AvianBodies, k: u32) -> u32 {
+    if let Some(local) = body.rigid_ids.iter().position(|&id| id == k) {
+        return local as u32;
+    }
+    body.rigid_ids.push(k);
+    let rigid = body.state.rigid_contacts_mut();
+    rigid.bodies.push(avian.start[k as usize]);
+    rigid.bodies.len() as u32 - 1
+}
+
+/// Gives `body` its attachment to an avian body for this step, capturing where each particle
+/// sits on the body the first time (or after the particles changed).
+fn attach(
+    entity: Entity,
+    body: &mut SoftBody,
+    attachment: &mut SoftBodyAttachment,
+    avian: &AvianBodies,
+    errors: &mut MessageWriter<SoftBodyError>,
+) {
+    let Some(&k) = avian.index.get(&attachment.body) else {
+        if !attachment.reported {
+            attachment.reported = true;
+            let kind = SoftBodyErrorKind::MissingDriveTarget(attachment.body);
+            report(errors, SoftBodyError { body: entity, kind });
+        }
+        return;
+    };
+    let (origin, rotation) = avian.poses[k as usize];
+    let count = body.state.positions().len();
+    if attachment.anchors.len() != attachment.particles.len() {
+        attachment.anchors.clear();
+        for &i in &attachment.particles {
+            match body.state.positions().get(i as usize) {
+                Some(&x) => attachment.anchors.push(rotation.inverse() * (x - origin)),
+                None => {
+                    let kind = SoftBodyErrorKind::ParticleOutOfRange { index: i, count };
+                    report(errors, SoftBodyError { body: entity, kind });
+                    attachment.anchors.push(Vec3::ZERO);
+                }
+            }
+        }
+    }
+    let local = local_body(body, avian, k);
+    let centre = avian.start[k as usize].centre_of_mass;
+    let rigid = body.state.rigid_contacts_mut();
+    for (&i, &anchor) in attachment.particles.iter().zip(&attachment.anchors) {
+        if (i as usize) < count {
+            rigid.attachments.push(RigidAttachment {
+                particle: i,
+                body: local,
+                offset: origin + rotation * anchor - centre,
+                compliance: attachment.compliance,
+            });
+        }
+    }
+}
+
+/// Particles of a soft body attached to an avian rigid body (put it on the soft body): held on
+/// the body where they are when the attachment starts, or pulled there by springs; two-way for
+/// a dynamic body, which the soft body pulls back (a bag hanging from a beam swings it). Pick
+/// the particles by index, or by a region of the rest shape with
+/// [`TetMesh::particles_in`](crate::core::TetMesh::particles_in).
+///
+/// The coupling is partitioned: the soft step pulls the body, then avian solves the body's own
+/// joints and contacts. A dynamic body much lighter than the soft mass it carries by a few
+/// particles can then oscillate and blow up: give such a body a realistic mass, or attach more
+/// particles. A body that runs away is caught and reported as any other.
+#[derive(Component, Clone, Debug)]
+pub struct SoftBodyAttachment {
+    /// The avian rigid body (dynamic, kinematic or static).
+    pub body: Entity,
+    /// The attached particles.
+    pub particles: Vec<u32>,
+    /// Compliance, metres per newton (the inverse of each particle's spring stiffness); zero
+    /// holds the particles on the body.
+    pub compliance: f32,
+    /// Where each particle is attached, in the body's frame (captured at the first step).
+    anchors: Vec<Vec3>,
+    /// Whether a missing body was reported.
+    reported: bool,
+}
+
+impl SoftBodyAttachment {
+    /// `particles` held on `body` where they are when the attachment starts.
+    pub fn hard(body: Entity, particles: Vec<u32>) -> Self {
+        SoftBodyAttachment {
+            body,
+            particles,
+            compliance: 0.0,
+            anchors: Vec::new(),
+            reported: false,
+        }
+    }
+
+    /// `particles` pulled toward where they were on `body` when the attachment started, each by
+    /// a spring of `stiffness` newtons per metre.
+    pub fn springs(body: Entity, particles: Vec<u32>, stiffness: f32) -> Self {
+        SoftBodyAttachment {
+            compliance: if stiffness > 0.0 {
+                1.0 / stiffness
+            } else {
+                0.0
+            },
+            ..SoftBodyAttachment::hard(body, particles)
         }
     }
 }

@@ -14,6 +14,26 @@ use crate::core::{Elasticity, ImpulseSettings, Plasticity, VolumeMethod};
 /// Shows the inspector panel. Adds `EguiPlugin` if the app has none yet.
 pub struct SoftBodyInspectorPlugin;
 
+/// The plot's line colours: red first for the volume impulses (and XPBD), blue first for the
+/// baseline, as the `compare` example paints its two bodies; the next body of the same kind
+/// takes the next colour (red, green, blue, as games often tell bodies apart), so that every
+/// line can be told apart.
+const PLOT_COLOURS: [&[egui::Color32]; 2] = [
+    &[
+        egui::Color32::from_rgb(230, 70, 90),
+        egui::Color32::from_rgb(60, 180, 90),
+        egui::Color32::from_rgb(80, 120, 240),
+        egui::Color32::from_rgb(240, 160, 40),
+        egui::Color32::from_rgb(170, 90, 220),
+        egui::Color32::from_rgb(40, 190, 200),
+    ],
+    &[
+        egui::Color32::from_rgb(90, 130, 240),
+        egui::Color32::from_rgb(130, 210, 255),
+        egui::Color32::from_rgb(150, 110, 240),
+    ],
+];
+
 /// Seconds of history the plot keeps.
 const HISTORY_SECS: f64 = 30.0;
 
@@ -121,14 +141,12 @@ fn inspector_panel(
                 .include_y(1.0)
                 .x_axis_label("s")
                 .show(ui, |plot| {
+                    let mut drawn = [0usize; 2];
                     for (entity, label, baseline) in &names {
                         if let Some(series) = history.series.get(entity) {
-                            // Blue for the baseline, red for impulses, as in the examples.
-                            let colour = if *baseline {
-                                egui::Color32::from_rgb(90, 130, 240)
-                            } else {
-                                egui::Color32::from_rgb(230, 70, 90)
-                            };
+                            let palette = PLOT_COLOURS[*baseline as usize];
+                            let colour = palette[drawn[*baseline as usize] % palette.len()];
+                            drawn[*baseline as usize] += 1;
                             plot.line(Line::new(label.clone(), series.clone()).color(colour));
                         }
                     }

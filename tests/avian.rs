@@ -7,9 +7,10 @@ use std::time::Duration;
 use avian3d::prelude::*;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
-use bevy_soft_body::avian::SoftBodyAvianPlugin;
-use bevy_soft_body::core::{TetMesh, box_grid};
+use bevy_soft_body::avian::{SoftBodyAttachment, SoftBodyAvianPlugin};
+use bevy_soft_body::core::{ParticleRegion, TetMesh, box_grid};
 use bevy_soft_body::prelude::*;
+use bevy_soft_body::{SoftBodyError, SoftBodyErrorKind};
 use glam::{Mat3, UVec3};
 
 fn app(gravity: Vec3, max_threads: usize) -> App {
@@ -238,4 +239,260 @@ fn results_do_not_depend_on_the_threads() {
     let one = run(1);
     assert!(one.1.y < 0.39, "the crate fell onto the jellies: {}", one.1);
     assert_eq!(run(usize::MAX), one);
+}
+
+/// Angle of `rotation` about the z axis, radians.
+fn angle_about_z(rotation: Quat) -> f32 {
+    let (axis, angle) = rotation.to_axis_angle();
+    axis.z.signum() * angle
+}
+
+/// A 1 m beam balanced on a hinge at its middle, with a 0.2 m jelly bag hung from its right
+/// end by the bag's top layer of particles (picked by a region of the rest shape): the bag
+/// pulls that end down and swings the beam, and the top layer stays on the beam. Without the
+/// bag the beam stays level.
+#[test]
+fn a_hanging_bag_swings_the_beam() {
+    let swing = |with_bag: bool| {
+        let mut app = app(Vec3::new(0.0, -9.81, 0.0), usize::MAX);
+        let pivot = Vec3::new(0.0, 2.0, 0.0);
+        let anchor = app
+            .world_mut()
+            .spawn((RigidBody::Static, Transform::from_translation(pivot)))
+            .id();
+        let beam = app
+            .world_mut()
+            .spawn((
+                RigidBody::Dynamic,
+                Collider::cuboid(1.0, 0.1, 0.1),
+                Mass(2.0),
+                Transform::from_translation(pivot),
+            ))
+            .id();
+        app.world_mut()
+            .spawn(RevoluteJoint::new(anchor, beam).with_anchor(pivot));
+        let mut bag = None;
+        if with_bag {
+            let mesh: Arc<TetMesh> = box_grid(UVec3::splat(6), Vec3::splat(0.2 / 6.0), Vec3::ZERO)
+                .unwrap()
+                .into();
+            let top = mesh.particles_in(ParticleRegion::Box {
+                min: Vec3::new(-1.0, 0.2 - 1e-4, -1.0),
+                max: Vec3::splat(1.0),
+            });
+            assert_eq!(top.len(), 49);
+            let mut body = SoftBody::new(mesh, SoftBodyMaterial::JELLY).unwrap();
+            body.state_mut().translate(Vec3::new(0.3, 1.74, -0.1));
+            bag = Some(
+                app.world_mut()
+                    .spawn((body, SoftBodyAttachment::hard(beam, top.clone())))
+                    .id(),
+            );
+        }
+        app.update();
+        let start: Vec<Vec3> = bag.map_or(Vec::new(), |bag| {
+            let state = app.world().get::<SoftBody>(bag).unwrap().state();
+            state.positions().to_vec()
+        });
+        let beam_start = *app.world().get::<Rotation>(beam).unwrap();
+        for _ in 0..20 {
+            app.update();
+        }
+        let world = app.world();
+        let rotation = world.get::<Rotation>(beam).unwrap();
+        let turned = angle_about_z(rotation.0) - angle_about_z(beam_start.0);
+        // How far the top layer drifted from where it hangs on the beam.
+        let mut drift = 0.0f32;
+        if let Some(bag) = bag {
+            let state = world.get::<SoftBody>(bag).unwrap().state();
+            let turn = rotation.0 * beam_start.0.inverse();
+            for (i, &x) in state.positions().iter().enumerate() {
+                if start[i].y > 1.94 - 1e-3 {
+                    let held = pivot + turn * (start[i] - pivot);
+                    drift = drift.max(x.distance(held));
+                }
+            }
+        }
+        let spin = world.get::<AngularVelocity>(beam).unwrap().0.length();
+        (turned, drift, spin)
+    };
+    let (level, ..) = swing(false);
+    assert!(level.abs() < 0.01, "the bare beam turned {level} rad");
+    let (turned, drift, spin) = swing(true);
+    // The bag's end (+x) goes down: a clockwise turn about z. Free of the beam's hinge
+    // friction, a 8.4 kg bag on a 0.45 m arm turns beam and bag (about 1.9 kg m^2) at about
+    // 20 rad/s^2: some 0.4 rad in 0.2 s.
+    assert!(
+        turned < -0.2 && turned > -0.8,
+        "the beam turned {turned} rad"
+    );
+    // Avian moves the beam after the soft step has held the particles where the beam was
+    // predicted to go: they lag it by at most one step of its motion at the 0.5 m tip.
+    let lag = spin * 0.01 * 0.5;
+    assert!(
+        drift < lag + 1e-3,
+        "the top layer drifted {drift} m from the beam (lag {lag} m)"
+    );
+    println!(
+        "beam turned {turned} rad in 0.2 s; top layer within {drift} m of the beam (one step: {lag} m)"
+    );
+}
+
+/// The centre of mass of a soft body.
+fn centre(app: &App, body: Entity) -> Vec3 {
+    app.world()
+        .get::<SoftBody>(body)
+        .unwrap()
+        .state()
+        .centre_of_mass()
+}
+
+/// A rubber cube on an avian box tilted by 30 degrees slides down it when the pair's friction
+/// (avian's `Friction` on the collider combined with the material's, geometric mean) is below
+/// tan 30 = 0.58: from rest it gains about `g (sin 30 - 0.1 cos 30) = 4.06 m/s^2`, some 2 m in
+/// the second (from 60 % to 120 % of that). With friction 1.2 it stays.
+#[test]
+fn a_rubber_cube_slides_down_a_slippery_tilted_box_and_stays_on_a_rough_one() {
+    let slide = |friction: f32| {
+        let mut app = app(Vec3::new(0.0, -9.81, 0.0), usize::MAX);
+        let tilt = Quat::from_rotation_z(-30f32.to_radians());
+        app.world_mut().spawn((
+            RigidBody::Static,
+            Collider::cuboid(4.0, 0.2, 1.0),
+            Friction::new(friction),
+            Transform::from_translation(Vec3::new(0.0, 1.0, 0.0)).with_rotation(tilt),
+        ));
+        let cube = SoftBody::new(
+            box_grid(UVec3::splat(4), Vec3::splat(0.05), Vec3::ZERO)
+                .unwrap()
+                .into(),
+            SoftBodyMaterial {
+                friction,
+                ..SoftBodyMaterial::RUBBER
+            },
+        )
+        .unwrap();
+        // On the box's top face, tilted with it, 5 mm above it.
+        let top = Vec3::new(0.0, 1.0, 0.0) + tilt * Vec3::new(0.0, 0.1, 0.0);
+        let placement = Transform::from_translation(top + tilt * Vec3::new(-0.1, 0.005, -0.1))
+            .with_rotation(tilt);
+        let body = app.world_mut().spawn((cube, placement)).id();
+        app.update();
+        let start = centre(&app, body);
+        for _ in 0..100 {
+            app.update();
+        }
+        let moved = centre(&app, body) - start;
+        // Down the slope: the slope's direction is the box's +x turned by the tilt (down to
+        // the right).
+        moved.dot(tilt * Vec3::X)
+    };
+    let icy = slide(0.1);
+    assert!(
+        (1.2..2.4).contains(&icy),
+        "on a slippery box the cube slid {icy} m in 1 s"
+    );
+    let rough = slide(1.2);
+    assert!(
+        rough.abs() < 0.02,
+        "on a rough box the cube slid {rough} m in 1 s"
+    );
+    println!("slid {icy} m in 1 s (friction 0.1), {rough} m (friction 1.2)");
+}
+
+/// A jelly on a kinematic avian platform moving sideways at 1 m/s rides along with it
+/// (friction), not left behind.
+#[test]
+fn a_jelly_rides_a_moving_platform() {
+    let mut app = app(Vec3::new(0.0, -9.81, 0.0), usize::MAX);
+    let platform = app
+        .world_mut()
+        .spawn((
+            RigidBody::Kinematic,
+            Collider::cuboid(3.0, 0.2, 1.0),
+            LinearVelocity(Vec3::new(1.0, 0.0, 0.0)),
+            Transform::from_xyz(0.0, 0.5, 0.0),
+        ))
+        .id();
+    let body = app
+        .world_mut()
+        .spawn(jelly(0.2, Vec3::new(-0.1, 0.6, -0.1)))
+        .id();
+    for _ in 0..10 {
+        app.update();
+    }
+    let start = (
+        centre(&app, body),
+        app.world().get::<Position>(platform).unwrap().0,
+    );
+    for _ in 0..60 {
+        app.update();
+    }
+    let jelly_moved = centre(&app, body).x - start.0.x;
+    let platform_moved = app.world().get::<Position>(platform).unwrap().0.x - start.1.x;
+    assert!(
+        (jelly_moved - platform_moved).abs() < 0.05,
+        "the platform moved {platform_moved} m, the jelly {jelly_moved} m"
+    );
+    assert!(centre(&app, body).y > 0.6, "the jelly fell off or sank");
+    println!("platform {platform_moved} m, jelly {jelly_moved} m in 0.6 s");
+}
+
+/// An attachment to an entity that is not an avian body, and one naming a particle the body
+/// does not have, are reported once each as errors naming what is wrong; nothing panics and
+/// the bodies go on (the valid particles of the second stay attached).
+#[test]
+fn bad_attachments_are_reported_not_panicked() {
+    let mut app = app(Vec3::new(0.0, -9.81, 0.0), usize::MAX);
+    let not_a_body = app.world_mut().spawn(Transform::default()).id();
+    let hook = app
+        .world_mut()
+        .spawn((RigidBody::Static, Transform::from_xyz(0.0, 2.0, 0.0)))
+        .id();
+    let lost = app
+        .world_mut()
+        .spawn((
+            jelly(0.2, Vec3::new(-2.0, 1.0, 0.0)),
+            SoftBodyAttachment::hard(not_a_body, vec![0]),
+        ))
+        .id();
+    let hung = app
+        .world_mut()
+        .spawn((
+            jelly(0.2, Vec3::new(2.0, 1.8, 0.0)),
+            SoftBodyAttachment::hard(hook, vec![0, 1_000_000]),
+        ))
+        .id();
+    let mut reported = Vec::new();
+    for _ in 0..30 {
+        app.update();
+        let messages = app.world().resource::<Messages<SoftBodyError>>();
+        reported.extend(messages.iter_current_update_messages().cloned());
+    }
+    assert_eq!(reported.len(), 2, "{reported:?}");
+    assert!(reported.iter().any(|e| e.body == lost
+        && matches!(e.kind, SoftBodyErrorKind::MissingDriveTarget(t) if t == not_a_body)));
+    assert!(reported.iter().any(|e| e.body == hung
+        && matches!(
+            e.kind,
+            SoftBodyErrorKind::ParticleOutOfRange {
+                index: 1_000_000,
+                ..
+            }
+        )));
+    // Particle 0 of the hung jelly is still where it was attached; the lost one fell.
+    let held = app
+        .world()
+        .get::<SoftBody>(hung)
+        .unwrap()
+        .state()
+        .positions()[0];
+    assert!(
+        held.distance(Vec3::new(2.0, 1.8, 0.0)) < 1e-2,
+        "particle 0 at {held}"
+    );
+    assert!(
+        centre(&app, lost).y < 0.9,
+        "the unattached jelly did not fall"
+    );
 }

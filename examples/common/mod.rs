@@ -602,3 +602,115 @@ pub fn grab(
         .insert(DrivenParticles::new(handle, particles));
     state.0 = Some((entity, handle, depth));
 }
+
+/// Whether R was pressed (or a reset asked for): then every [`SceneMember`] is despawned and
+/// any grab let go, and the example spawns its scene again.
+pub fn clear_scene_on_reset(
+    keys: &ButtonInput<KeyCode>,
+    reset: &mut ResetScene,
+    members: &Query<Entity, With<SceneMember>>,
+    grab: &mut Grab,
+    commands: &mut Commands,
+) -> bool {
+    if !(keys.just_pressed(KeyCode::KeyR) || reset.0) {
+        return false;
+    }
+    reset.0 = false;
+    grab.0 = None;
+    for entity in members {
+        commands.entity(entity).despawn();
+    }
+    true
+}
+
+/// What an example spawns its scene with (for [`respawn_on_reset`]).
+pub type SpawnScene = fn(Commands, ResMut<Assets<Mesh>>, ResMut<Assets<StandardMaterial>>);
+
+/// A system that spawns the scene anew with `spawn` when R is pressed (or a reset asked for).
+#[allow(clippy::type_complexity)]
+pub fn respawn_on_reset(
+    spawn: SpawnScene,
+) -> impl FnMut(
+    Res<ButtonInput<KeyCode>>,
+    ResMut<ResetScene>,
+    Query<Entity, With<SceneMember>>,
+    ResMut<Grab>,
+    Commands,
+    ResMut<Assets<Mesh>>,
+    ResMut<Assets<StandardMaterial>>,
+) {
+    move |keys, mut reset, members, mut grab, mut commands, meshes, materials| {
+        if clear_scene_on_reset(&keys, &mut reset, &members, &mut grab, &mut commands) {
+            spawn(commands, meshes, materials);
+        }
+    }
+}
+
+/// The grey of the avian examples' static ground and fixtures.
+#[cfg(feature = "avian")]
+pub fn fixture_material(materials: &mut Assets<StandardMaterial>) -> Handle<StandardMaterial> {
+    materials.add(StandardMaterial {
+        base_color: Color::srgb(0.55, 0.57, 0.6),
+        perceptual_roughness: 0.8,
+        ..default()
+    })
+}
+
+/// An avian ground (a static half-space), drawn as a `size` metre square of `material`.
+#[cfg(feature = "avian")]
+pub fn spawn_avian_ground(
+    commands: &mut Commands,
+    meshes: &mut Assets<Mesh>,
+    material: Handle<StandardMaterial>,
+    size: f32,
+) {
+    use avian3d::prelude::{Collider, RigidBody};
+    commands.spawn((
+        RigidBody::Static,
+        Collider::half_space(Vec3::Y),
+        Mesh3d(meshes.add(Plane3d::default().mesh().size(size, size))),
+        MeshMaterial3d(material),
+        Transform::default(),
+        SceneMember,
+    ));
+}
+
+/// The crate T throws from the camera in the avian examples: edge (m), mass (kg), speed (m/s).
+#[cfg(feature = "avian")]
+#[derive(Resource, Clone, Copy)]
+pub struct ThrownCrate {
+    pub size: f32,
+    pub mass: f32,
+    pub speed: f32,
+}
+
+/// T throws a [`ThrownCrate`] (an avian body) from the camera.
+#[cfg(feature = "avian")]
+pub fn throw_crate(
+    keys: Res<ButtonInput<KeyCode>>,
+    thrown: Res<ThrownCrate>,
+    camera: Query<&Transform, With<Camera3d>>,
+    mut meshes: ResMut<Assets<Mesh>>,
+    mut materials: ResMut<Assets<StandardMaterial>>,
+    mut commands: Commands,
+) {
+    use avian3d::prelude::{AngularVelocity, Collider, LinearVelocity, Mass, RigidBody};
+    if !keys.just_pressed(KeyCode::KeyT) {
+        return;
+    }
+    let Ok(eye) = camera.single() else {
+        return;
+    };
+    let size = thrown.size;
+    commands.spawn((
+        RigidBody::Dynamic,
+        Collider::cuboid(size, size, size),
+        Mass(thrown.mass),
+        Mesh3d(meshes.add(Cuboid::from_length(size))),
+        MeshMaterial3d(materials.add(StandardMaterial::from_color(Color::srgb(0.72, 0.52, 0.3)))),
+        Transform::from_translation(eye.translation + eye.forward() * 0.8),
+        LinearVelocity(eye.forward() * thrown.speed),
+        AngularVelocity(Vec3::new(1.0, 2.0, 0.5)),
+        SceneMember,
+    ));
+}

@@ -146,6 +146,10 @@ pub(crate) struct StepScratch {
     pub(crate) chunk_findings: Vec<ChunkFindings>,
     /// Velocities before a substep's volume impulses (see `xpbd.rs`).
     pub(crate) substep_velocities: Vec<Vec3>,
+    /// Per particle, how deep its predicted position was in a static collider in the last
+    /// contact pass (zero when it touched none) and the pair's friction: what
+    /// `SoftBodyState::support_friction` shares the ground's push out by.
+    pub(crate) static_contact: Vec<[f32; 2]>,
     /// Per vertex, whether its ring was past its tolerance when its impulse last checked it:
     /// a guess of whether it will be again, which decides only how the check is computed,
     /// never its result (see `VolumePass::ring_impulse`).
@@ -218,6 +222,7 @@ impl SoftBodyState {
                 substep_plan: None,
                 soft_touched: Vec::new(),
                 substep_velocities: vec![Vec3::ZERO; n],
+                static_contact: vec![[0.0; 2]; n],
                 shape_bundles: shape_bundles(&mesh),
             },
             mesh,

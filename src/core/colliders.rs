@@ -194,6 +194,11 @@ pub struct RigidBodyMotion {
     /// in `linear_velocity`: a soft body solved in substeps hands it out per substep, as to
     /// its particles, so that a body resting on it is held by the same substeps.
     pub gravity: Vec3,
+    /// Whether the other engine has put the body to sleep: it wakes if a contact changes its
+    /// velocity enough, but does not keep a soft body under it awake.
+    pub asleep: bool,
+    /// How many particles are attached to the body in this pass (scratch of the contacts).
+    pub(crate) attached: u32,
 }
 
 impl RigidBodyMotion {
@@ -206,6 +211,8 @@ impl RigidBodyMotion {
             inv_mass: 0.0,
             inv_inertia: Mat3::ZERO,
             gravity: Vec3::ZERO,
+            asleep: false,
+            attached: 0,
         }
     }
 
@@ -227,6 +234,17 @@ impl RigidBodyMotion {
     pub(crate) fn apply_impulse(&mut self, impulse: Vec3, r: Vec3) {
         self.linear_velocity += self.inv_mass * impulse;
         self.angular_velocity += self.inv_inertia * r.cross(impulse);
+    }
+
+    /// Where the body's point at `offset` from its centre of mass at the step's start is after
+    /// `t` seconds of this motion, and its offset from the centre of mass then.
+    #[inline]
+    pub(crate) fn point_at(&self, offset: Vec3, t: f32) -> (Vec3, Vec3) {
+        let turned = Quat::from_scaled_axis(self.angular_velocity * t) * offset;
+        (
+            self.centre_of_mass + t * self.linear_velocity + turned,
+            turned,
+        )
     }
 
     /// Where a frame at `pose` at the step's start is after `t` seconds of this motion, and where
@@ -265,19 +283,41 @@ pub struct RigidContacts {
     pub bodies: Vec<RigidBodyMotion>,
     /// Their colliders.
     pub colliders: Vec<RigidCollider>,
+    /// Particles attached to the bodies.
+    pub attachments: Vec<RigidAttachment>,
+}
+
+/// A particle attached to a point of a rigid body: held there (`compliance` zero) or pulled
+/// there by a spring of stiffness `1 / compliance`, two-way: the body is pulled back.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RigidAttachment {
+    /// The particle.
+    pub particle: u32,
+    /// Index of the body in [`RigidContacts::bodies`].
+    pub body: u32,
+    /// The point it is attached to, from the body's centre of mass at the start of the step
+    /// (world axes).
+    pub offset: Vec3,
+    /// Compliance (metres per newton); zero holds the particle on the point.
+    pub compliance: f32,
 }
 
 impl RigidContacts {
-    /// Removes every body and collider (keeping the buffers).
+    /// Removes every body, collider and attachment (keeping the buffers).
     pub fn clear(&mut self) {
         self.bodies.clear();
         self.colliders.clear();
+        self.attachments.clear();
     }
 
-    /// Whether any body here could push the soft body or be pushed by it.
+    /// Whether any body here could push the soft body or be pushed by it (a sleeping one
+    /// cannot, until something wakes it).
     pub(crate) fn any_moving(&self) -> bool {
         self.bodies.iter().any(|b| {
-            b.inv_mass > 0.0 || b.linear_velocity != Vec3::ZERO || b.angular_velocity != Vec3::ZERO
+            !b.asleep
+                && (b.inv_mass > 0.0
+                    || b.linear_velocity != Vec3::ZERO
+                    || b.angular_velocity != Vec3::ZERO)
         })
     }
 
@@ -296,6 +336,7 @@ impl std::fmt::Debug for RigidContacts {
         f.debug_struct("RigidContacts")
             .field("bodies", &self.bodies)
             .field("colliders", &self.colliders.len())
+            .field("attachments", &self.attachments)
             .finish()
     }
 }

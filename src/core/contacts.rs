@@ -26,7 +26,9 @@
 //! (see `static_friction`): with velocity-only friction the volume impulses' small pushes at
 //! a resting body's base, each stopped by friction only while it pressed into the ground, made
 //! the body walk across the ground and never come to rest (PERFORMANCE.md, stop 30). Against a
-//! sphere, friction is Coulomb's on the relative velocity.
+//! sphere, friction is Coulomb's on the relative velocity. The ground's push that the volume
+//! impulses meet (their pushes into it that `constrain_direction` takes out) is a normal force
+//! too, and gets its friction after them (`support_friction`).
 
 use glam::Vec3;
 use parry3d::bounding_volume::Aabb;
@@ -102,6 +104,7 @@ impl SoftBodyState {
         let kept = unsafe { SharedSlice::new(&mut self.contact_kept) };
         let sphere = unsafe { SharedSlice::new(&mut self.contact_sphere) };
         let anchors = unsafe { SharedSlice::new(&mut self.friction_anchors) };
+        let static_contact = unsafe { SharedSlice::new(&mut self.scratch.static_contact) };
         in_particle_chunks(
             parallel,
             &mut self.scratch.chunk_findings,
@@ -112,6 +115,7 @@ impl SoftBodyState {
                         continue;
                     }
                     let mut touched = false;
+                    static_contact.set(i, [0.0; 2]);
                     for c in colliders {
                         if !filter.interacts_with(c.filter) {
                             continue;
@@ -128,6 +132,7 @@ impl SoftBodyState {
                             static_friction(x, v, normal, depth, mu, h, anchors.get(i));
                         velocities.set(i, v);
                         anchors.set(i, anchor);
+                        static_contact.set(i, [depth, mu]);
                         // As `record_contact`, with the new ones listed by the job.
                         if normals.get(i) == Vec3::ZERO {
                             found.new_touching.push(i as u32);
@@ -150,6 +155,41 @@ impl SoftBodyState {
             contacts += std::mem::take(&mut found.contacts);
         }
         contacts
+    }
+
+    /// Coulomb friction for the push the static colliders gave a substep's volume impulses:
+    /// `push` is the impulses' net change of momentum, which is not zero only because
+    /// `constrain_direction` took out their pushes into what the particles touch. The volume
+    /// impulses carry much of a resting body's weight that way, so friction counted on the
+    /// contact pass's push alone lets a body slide down a slope its friction should hold.
+    /// `push` is shared out over the particles in static contact in proportion to their
+    /// contact pass's push (mass times depth), and each loses tangential velocity `v` up to
+    /// its friction coefficient times its share over its mass. Returns the change of velocity.
+    pub(crate) fn support_friction(
+        &self,
+        push: Vec3,
+        total_weight: f32,
+        i: usize,
+        v: Vec3,
+    ) -> Vec3 {
+        let [depth, mu] = self.scratch.static_contact[i];
+        if depth <= 0.0 || total_weight <= 0.0 {
+            return Vec3::ZERO;
+        }
+        let n = self.contact_normals[i];
+        let share = push.dot(n).max(0.0) * depth / total_weight;
+        friction_change(v - n * v.dot(n), mu * share)
+    }
+
+    /// The weight `support_friction` shares the push out by: the particles' mass times depth
+    /// in the static colliders, summed.
+    pub(crate) fn static_contact_weight(&self) -> f32 {
+        self.scratch
+            .static_contact
+            .iter()
+            .zip(&self.masses)
+            .map(|(&[depth, _], &m)| m * depth)
+            .sum()
     }
 
     /// Pushes predicted positions out of the (predicted) rigid spheres, pushing the spheres
@@ -219,10 +259,43 @@ impl SoftBodyState {
     /// seconds into the step (a substep's start) plus `h`, pushing the bodies back. Returns the
     /// number of contacts.
     pub(crate) fn resolve_rigid_contacts(&mut self, h: f32, elapsed: f32) -> u32 {
-        if self.rigid.colliders.is_empty() {
+        if self.rigid.colliders.is_empty() && self.rigid.attachments.is_empty() {
             return 0;
         }
         let mut rigid = std::mem::take(&mut self.rigid);
+        // Attached particles first: each is taken to its point of the body where both are
+        // predicted to be, sharing the impulse by inverse mass (the body's at that point), or
+        // pulled there by its spring (XPBD's compliance over the step's length). A body holding
+        // `n` particles shows each of them `n` times its inverse mass (mass splitting): one
+        // pass of `n` constraints that each took the body for theirs alone would move it `n`
+        // times too far, and a light beam holding a heavy bag would spin up.
+        for body in rigid.bodies.iter_mut() {
+            body.attached = 0;
+        }
+        for a in &rigid.attachments {
+            rigid.bodies[a.body as usize].attached += 1;
+        }
+        for a in &rigid.attachments {
+            let i = a.particle as usize;
+            let w = self.inv_masses[i];
+            let body = &mut rigid.bodies[a.body as usize];
+            let split = body.attached as f32;
+            let (target, r) = body.point_at(a.offset, elapsed + h);
+            let xp = self.positions[i] + h * self.velocities[i];
+            let gap = target - xp;
+            let distance = gap.length();
+            if distance <= 0.0 || !distance.is_finite() {
+                continue;
+            }
+            let n = gap / distance;
+            let inv_mass = w + split * body.inv_mass_along(r, n) + a.compliance / (h * h);
+            if inv_mass <= 0.0 {
+                continue;
+            }
+            let lambda = distance / h / inv_mass;
+            self.velocities[i] += n * (lambda * w);
+            body.apply_impulse(-n * lambda, r);
+        }
         let friction = self.material.friction;
         let filter = self.collision_filter;
         let mut contacts = 0;
@@ -448,12 +521,11 @@ mod tests {
         let rot = Mat3::from_quat(rotation);
         let centre = Vec3::new(0.3, 0.45, 0.2);
         let crate_motion = RigidBodyMotion {
-            centre_of_mass: centre,
             linear_velocity: Vec3::new(0.0, -2.0, 0.3),
             angular_velocity: Vec3::new(1.0, 0.0, -2.0),
             inv_mass: 1.0 / mass,
             inv_inertia: rot * Mat3::from_diagonal(inertia.recip()) * rot.transpose(),
-            gravity: Vec3::ZERO,
+            ..RigidBodyMotion::kinematic(centre, Vec3::ZERO, Vec3::ZERO)
         };
         let rigid = body.rigid_contacts_mut();
         rigid.bodies.push(crate_motion);

@@ -33,8 +33,8 @@ pub(crate) mod xpbd;
 pub use body::{ParticleIndexError, SoftBodyState, VolumeMetrics};
 pub use boundary::{Boundary, SoftContactSettings};
 pub use colliders::{
-    ColliderInstance, CollisionFilter, RigidBodyMotion, RigidCollider, RigidContacts,
-    RigidSphereState,
+    ColliderInstance, CollisionFilter, RigidAttachment, RigidBodyMotion, RigidCollider,
+    RigidContacts, RigidSphereState,
 };
 pub use embedding::{EmbeddingError, SurfaceBinding};
 pub use grid::{GridError, box_grid, sdf_grid};
@@ -53,7 +53,7 @@ pub use soft_contacts::{
 };
 pub use step::Stage;
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
-pub use tet_mesh::{Blocks, TetMesh, TetMeshError};
+pub use tet_mesh::{Blocks, ParticleRegion, TetMesh, TetMeshError};
 pub use tetgen::{TetGenError, TetGenFile, parse_tetgen, write_tetgen};
 pub use tetrahedralize::{
     Resolution, Tetrahedralization, TetrahedralizeError, face_components, tetrahedralize,

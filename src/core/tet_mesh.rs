@@ -415,6 +415,14 @@ impl TetMesh {
         self.reoriented_tets
     }
 
+    /// The particles whose rest positions lie in `region` (mesh coordinates), in index order:
+    /// how a game picks the particles to pin, drive or attach without knowing indices.
+    pub fn particles_in(&self, region: ParticleRegion) -> Vec<u32> {
+        (0..self.positions.len() as u32)
+            .filter(|&i| region.contains(self.positions[i as usize]))
+            .collect()
+    }
+
     /// Axis-aligned bounds of the rest positions.
     pub fn bounds(&self) -> (Vec3, Vec3) {
         self.positions.iter().fold(
@@ -470,6 +478,38 @@ impl TetMesh {
             .iter()
             .map(|tet| min_dihedral_deg(&tet.map(|i| self.positions[i as usize])))
             .fold(180.0, f32::min)
+    }
+}
+
+/// A region of a mesh's rest shape (mesh coordinates), to pick particles by
+/// ([`TetMesh::particles_in`]).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum ParticleRegion {
+    /// An axis-aligned box.
+    Box {
+        /// Its lowest corner.
+        min: Vec3,
+        /// Its highest corner.
+        max: Vec3,
+    },
+    /// A ball.
+    Sphere {
+        /// Its centre.
+        centre: Vec3,
+        /// Its radius.
+        radius: f32,
+    },
+}
+
+impl ParticleRegion {
+    /// Whether `p` lies in the region (its boundary included).
+    pub fn contains(self, p: Vec3) -> bool {
+        match self {
+            ParticleRegion::Box { min, max } => p.cmpge(min).all() && p.cmple(max).all(),
+            ParticleRegion::Sphere { centre, radius } => {
+                p.distance_squared(centre) <= radius * radius
+            }
+        }
     }
 }
 

@@ -314,7 +314,8 @@ impl SoftBodyState {
     /// `sum m v.dv <= -1/2 sum m |dv|^2`); what only restores drifted volume, a tet crushed by
     /// a landing or a tet inverted, moves the particles back without launching them (the
     /// measurements are in PERFORMANCE.md, "The step of a physical material"). One scale for the whole body, so
-    /// momentum is conserved (the impulses' `sum m dv` is zero, and so is `k` times it).
+    /// momentum is conserved (the impulses' `sum m dv` is zero, and so is `k` times it) but for
+    /// what the static colliders pushed back, whose friction comes last (`support_friction`).
     fn volume_impulses_in_substep(
         &mut self,
         hs: f32,
@@ -326,7 +327,9 @@ impl SoftBodyState {
             .copy_from_slice(&self.velocities);
         self.one_ring_impulses(hs, spheres, parallel);
         self.per_tet_impulses(hs, spheres, parallel);
-        let (mut along, mut squared) = (0.0f64, 0.0f64);
+        // `push`: what the static colliders pushed back, which gets its friction
+        // (`support_friction`).
+        let (mut along, mut squared, mut push) = (0.0f64, 0.0f64, Vec3::ZERO);
         for ((&v, &before), &m) in self
             .velocities
             .iter()
@@ -336,20 +339,21 @@ impl SoftBodyState {
             let dv = v - before;
             along += (m * before.dot(dv)) as f64;
             squared += (m * dv.length_squared()) as f64;
+            push += m * dv;
         }
         let k = if squared > 0.0 {
             (-2.0 * along / squared).clamp(0.0, 1.0) as f32
         } else {
             1.0
         };
-        for ((x, v), &before) in self
-            .positions
-            .iter_mut()
-            .zip(&mut self.velocities)
-            .zip(&self.scratch.substep_velocities)
-        {
-            *x += hs * *v;
-            *v = before + k * (*v - before);
+        let weight = self.static_contact_weight();
+        for i in 0..self.velocities.len() {
+            let before = self.scratch.substep_velocities[i];
+            let full = self.velocities[i];
+            let v = before + k * (full - before);
+            let friction = self.support_friction(push, weight, i, v);
+            self.positions[i] += hs * (full + friction);
+            self.velocities[i] = v + friction;
         }
     }
 

@@ -24,8 +24,8 @@ mod threads;
 mod timing;
 
 pub use systems::SolverSpheres;
-pub(crate) use systems::gather_spheres;
 use systems::*;
+pub(crate) use systems::{gather_spheres, report};
 #[cfg(test)]
 pub(crate) use threads::test_compute_pool;
 use threads::*;

@@ -24,7 +24,7 @@ pub(super) type PreparedBody<'a> = (
 );
 
 /// Logs `error` and writes it as a message.
-pub(super) fn report(errors: &mut MessageWriter<SoftBodyError>, error: SoftBodyError) {
+pub(crate) fn report(errors: &mut MessageWriter<SoftBodyError>, error: SoftBodyError) {
     error!("{error}");
     errors.write(error);
 }
