@@ -160,6 +160,14 @@ pub(crate) struct StepScratch {
     pub(crate) substep_plan: Option<SubstepPlan>,
     /// The particles the last soft-contact pass touched and their normals (`soft_contacts.rs`).
     pub(crate) soft_touched: Vec<(u32, Vec3)>,
+    /// This substep's soft contacts of this body's particles (`soft_contacts.rs`).
+    pub(crate) soft_supports: Vec<crate::core::soft_contacts::SoftSupport>,
+    /// What this body's volume impulses handed to other bodies this substep.
+    pub(crate) soft_reactions: Vec<crate::core::soft_contacts::SoftReaction>,
+    /// Per particle, where static friction holds it on another body (`soft_contacts.rs`).
+    pub(crate) soft_anchors: Vec<crate::core::soft_contacts::SoftAnchor>,
+    /// The number of substep soft-contact passes so far: which anchors are current.
+    pub(crate) soft_pass: u32,
 }
 
 impl SoftBodyState {
@@ -221,6 +229,10 @@ impl SoftBodyState {
                 ring_corrected: vec![false; n],
                 substep_plan: None,
                 soft_touched: Vec::new(),
+                soft_supports: Vec::new(),
+                soft_reactions: Vec::new(),
+                soft_anchors: vec![crate::core::soft_contacts::SoftAnchor::NONE; n],
+                soft_pass: 1,
                 substep_velocities: vec![Vec3::ZERO; n],
                 static_contact: vec![[0.0; 2]; n],
                 shape_bundles: shape_bundles(&mesh),

@@ -39,6 +39,33 @@ use super::lanes::Point4;
 use super::parallel::{Parallel, SharedSlice};
 use super::step::Stage;
 
+/// A particle's contact with another body's triangle in a substep: what the volume impulses'
+/// pushes into that body are handed to (`SoftBodyState::soft_support`).
+#[derive(Clone, Copy, Debug)]
+pub struct SoftSupport {
+    pub(crate) particle: u32,
+    pub(crate) normal: Vec3,
+    pub(crate) partner: u32,
+    pub(crate) corners: [u32; 3],
+    pub(crate) weights: Vec3,
+    /// How far the triangle's point moved since the substep's start.
+    pub(crate) travel: Vec3,
+    /// The triangle point's inverse mass, `sum b_j^2 w_j`.
+    pub(crate) inv_mass: f32,
+    pub(crate) friction: f32,
+    /// The normal impulse the volume impulses pushed into the triangle (`take_soft_pushes`).
+    pub(crate) pushed: f32,
+}
+
+/// An impulse one body's volume impulses hand to another's triangle.
+#[derive(Clone, Copy, Debug)]
+pub struct SoftReaction {
+    pub(crate) partner: u32,
+    pub(crate) corners: [u32; 3],
+    pub(crate) weights: Vec3,
+    pub(crate) impulse: Vec3,
+}
+
 /// Which of a step's two soft-contact passes runs (see the module's documentation).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum SoftContactPhase {
@@ -96,7 +123,7 @@ impl SoftBodyState {
     fn record_soft_contacts(&mut self) {
         for k in 0..self.scratch.soft_touched.len() {
             let (i, n) = self.scratch.soft_touched[k];
-            let kept = if std::env::var("KEPT1").is_ok() { 1.0 } else { 0.0 };
+            let kept = if std::env::var("KEPT1").is_ok() || std::env::var("SUPP").is_ok() { 1.0 } else { 0.0 };
             self.record_contact(i as usize, n, kept, None);
         }
     }
@@ -125,6 +152,81 @@ impl SoftBodyState {
     }
 }
 
+impl SoftBodyState {
+    /// Takes out of the volume impulses' change of velocity (`velocities` less
+    /// `substep_velocities`) each soft-contact particle's push into the other body, keeping it
+    /// in the support's `travel`-free slot `normal * depth` as an impulse; returns their sum.
+    pub(crate) fn take_soft_pushes(&mut self) -> Vec3 {
+        let mut total = Vec3::ZERO;
+        for s in self.scratch.soft_supports.iter_mut() {
+            let i = s.particle as usize;
+            let dv = self.velocities[i] - self.scratch.substep_velocities[i];
+            let into = dv.dot(s.normal);
+            if into < 0.0 {
+                self.velocities[i] -= s.normal * into;
+                let impulse = -self.masses[i] * into;
+                total += s.normal * impulse;
+                s.pushed = impulse;
+            } else {
+                s.pushed = 0.0;
+            }
+        }
+        total
+    }
+
+    /// Hands the pushes `take_soft_pushes` took out (scaled by the substep's energy scale `k`)
+    /// to the other bodies' triangles, with Coulomb friction on the particle's slip over the
+    /// triangle, both ways. The reactions wait in `soft_reactions` for the lockstep loop.
+    pub(crate) fn hand_soft_pushes(&mut self, hs: f32, k: f32) {
+        let supports = std::mem::take(&mut self.scratch.soft_supports);
+        for s in &supports {
+            if s.pushed <= 0.0 {
+                continue;
+            }
+            let i = s.particle as usize;
+            let jn = k * s.pushed;
+            let w_p = self.inv_masses[i];
+            let w = w_p + s.inv_mass;
+            let rel = self.velocities[i] - s.travel / hs;
+            let slip = rel - s.normal * rel.dot(s.normal);
+            let slip_speed = slip.length();
+            let mut impulse = -s.normal * jn;
+            if slip_speed > 0.0 && w > 0.0 && std::env::var("NOSUPFRIC").is_err() {
+                let jt = (slip_speed / w).min(s.friction * jn);
+                let dv = -slip * (jt / slip_speed) * w_p;
+                self.velocities[i] += dv;
+                self.positions[i] += hs * dv;
+                impulse += slip * (jt / slip_speed);
+            }
+            self.scratch.soft_reactions.push(SoftReaction {
+                partner: s.partner,
+                corners: s.corners,
+                weights: s.weights,
+                impulse,
+            });
+        }
+        self.scratch.soft_supports = supports;
+        self.scratch.soft_supports.clear();
+    }
+}
+
+/// Applies the reactions every body's volume impulses handed on this substep.
+pub(crate) fn apply_soft_reactions<B: DerefMut<Target = SoftBodyState>>(bodies: &mut [B]) {
+    for b in 0..bodies.len() {
+        let reactions = std::mem::take(&mut bodies[b].scratch.soft_reactions);
+        for r in &reactions {
+            let partner = &mut bodies[r.partner as usize];
+            for k in 0..3 {
+                let j = r.corners[k] as usize;
+                let w = partner.inv_masses[j];
+                partner.velocities[j] += r.impulse * (r.weights[k] * w);
+            }
+        }
+        bodies[b].scratch.soft_reactions = reactions;
+        bodies[b].scratch.soft_reactions.clear();
+    }
+}
+
 /// A body's particles as the narrow phase reads and writes them; for a self contact both
 /// sides are the same arrays (hence shared slices, read and written one element at a time on
 /// this thread).
@@ -134,10 +236,38 @@ struct Arrays<'a> {
     w: &'a [f32],
     /// Where each particle started the substep (for [`SoftContactPhase::Substep`]).
     start: &'a [Point4],
+    anchors: SharedSlice<'a, SoftAnchor>,
+    pass: u32,
+}
+
+/// Where a particle's static friction holds it on another body's surface: a point of one of
+/// its triangles, set in soft-contact pass `pass`.
+#[derive(Clone, Copy, Debug)]
+pub struct SoftAnchor {
+    pub(crate) partner: u32,
+    pub(crate) corners: [u32; 3],
+    pub(crate) weights: Vec3,
+    pub(crate) pass: u32,
+}
+
+impl SoftAnchor {
+    pub(crate) const NONE: SoftAnchor = SoftAnchor {
+        partner: u32::MAX,
+        corners: [0; 3],
+        weights: Vec3::ZERO,
+        pass: 0,
+    };
 }
 
 impl<'a> Arrays<'a> {
-    fn new(x: &'a mut [Vec3], v: &'a mut [Vec3], w: &'a [f32], start: &'a [Point4]) -> Self {
+    fn new(
+        x: &'a mut [Vec3],
+        v: &'a mut [Vec3],
+        w: &'a [f32],
+        start: &'a [Point4],
+        anchors: &'a mut [SoftAnchor],
+        pass: u32,
+    ) -> Self {
         // SAFETY: the narrow phase runs on this thread alone, reading and writing one element
         // at a time and holding no reference into the slices.
         unsafe {
@@ -146,6 +276,8 @@ impl<'a> Arrays<'a> {
                 v: SharedSlice::new(v),
                 w,
                 start,
+                anchors: SharedSlice::new(anchors),
+                pass,
             }
         }
     }
@@ -162,14 +294,14 @@ pub fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
     }
     let mut contacts = 0;
     for a in 0..bodies.len() {
-        contacts += resolve_self(&mut bodies[a], phase);
+        contacts += resolve_self(&mut bodies[a], phase, a as u32);
         for b in a + 1..bodies.len() {
             let (left, right) = bodies.split_at_mut(b);
             let (Some(ra), Some(rb)) = (left[a].boundary.reach, right[0].boundary.reach) else {
                 continue;
             };
             if ra.intersects(&rb) {
-                contacts += resolve_pair(&mut left[a], &mut right[0], phase, &ra, &rb);
+                contacts += resolve_pair(&mut left[a], &mut right[0], phase, &ra, &rb, [a as u32, b as u32]);
             }
         }
     }
@@ -180,6 +312,12 @@ pub fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
 /// part. The plugin calls this on every body, then [`resolve_pair`] on the overlapping pairs
 /// and [`resolve_self`] on each body.
 pub fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) -> Option<Aabb> {
+    if phase != SoftContactPhase::Final {
+        body.scratch.soft_supports.clear();
+    }
+    if phase == SoftContactPhase::Substep {
+        body.scratch.soft_pass += 1;
+    }
     let margin = body.soft_contacts.map_or(0.0, |s| s.thickness);
     body.prepare_soft_contacts(phase.ahead(), margin)
 }
@@ -192,6 +330,7 @@ pub fn resolve_pair(
     phase: SoftContactPhase,
     ra: &Aabb,
     rb: &Aabb,
+    slots: [u32; 2],
 ) -> u32 {
     let (Some(sa), Some(sb)) = (a.soft_contacts, b.soft_contacts) else {
         return 0;
@@ -207,12 +346,16 @@ pub fn resolve_pair(
         &mut a.velocities,
         &a.inv_masses,
         &a.scratch.predicted,
+        &mut a.scratch.soft_anchors,
+        a.scratch.soft_pass,
     );
     let pb = Arrays::new(
         &mut b.positions,
         &mut b.velocities,
         &b.inv_masses,
         &b.scratch.predicted,
+        &mut b.scratch.soft_anchors,
+        b.scratch.soft_pass,
     );
     let (ba, bb) = (&a.boundary, &b.boundary);
     let (ta, tb) = (&mut a.scratch.soft_touched, &mut b.scratch.soft_touched);
@@ -227,6 +370,8 @@ pub fn resolve_pair(
             friction: mu,
             pair_normal: None,
             probe: Some(std::cell::Cell::new(Vec3::ZERO)),
+            partner: 0,
+            supports: Default::default(),
         };
         probe.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta);
         let sum_a = probe.probe.as_ref().unwrap().replace(Vec3::ZERO);
@@ -244,6 +389,8 @@ pub fn resolve_pair(
         friction: mu,
         pair_normal: n_ab,
         probe: None,
+        partner: slots[1],
+        supports: std::mem::take(&mut a.scratch.soft_supports).into(),
     };
     let contact_b = Contact {
         phase,
@@ -251,11 +398,15 @@ pub fn resolve_pair(
         friction: mu,
         pair_normal: n_ab.map(|n| -n),
         probe: None,
+        partner: slots[0],
+        supports: std::mem::take(&mut b.scratch.soft_supports).into(),
     };
     let oneway = std::env::var("ONEWAY").is_ok();
     let contacts =
         (if oneway { 0 } else { contact_a.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta) })
             + contact_b.particles_against_triangles(&bb.particles, &pb, ba, &pa, None, &overlap, tb);
+    a.scratch.soft_supports = contact_a.supports.into_inner();
+    b.scratch.soft_supports = contact_b.supports.into_inner();
     a.record_soft_contacts();
     b.record_soft_contacts();
     // A sleeping body touched by a moving one wakes; two sleeping ones stay as they are.
@@ -270,7 +421,7 @@ pub fn resolve_pair(
 }
 
 /// Contacts of a body with itself, if it asks for them.
-pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase) -> u32 {
+pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) -> u32 {
     let Some(settings) = body.soft_contacts.filter(|s| s.self_contacts) else {
         return 0;
     };
@@ -282,6 +433,8 @@ pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase) -> u32 {
         &mut body.velocities,
         &body.inv_masses,
         &body.scratch.predicted,
+        &mut body.scratch.soft_anchors,
+        body.scratch.soft_pass,
     );
     let contact = Contact {
         phase,
@@ -289,6 +442,8 @@ pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase) -> u32 {
         friction: body.material.friction,
         pair_normal: None,
         probe: None,
+        partner: slot,
+        supports: std::mem::take(&mut body.scratch.soft_supports).into(),
     };
     let boundary = &body.boundary;
     let rest = body.mesh.positions();
@@ -303,6 +458,7 @@ pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase) -> u32 {
         &reach,
         touched,
     );
+    body.scratch.soft_supports = contact.supports.into_inner();
     body.record_soft_contacts();
     contacts
 }
@@ -395,6 +551,9 @@ struct Contact {
     pair_normal: Option<Vec3>,
     /// When set, contacts are only summed here (depth times normal), not resolved.
     probe: Option<std::cell::Cell<Vec3>>,
+    /// The slot of the triangles' body, and the supports found (substep phase).
+    partner: u32,
+    supports: std::cell::RefCell<Vec<SoftSupport>>,
 }
 
 impl Contact {
@@ -513,6 +672,25 @@ impl Contact {
         // The gap only finds contacts early; a contact takes the particle to the surface, as
         // the ground does (pushing it out to the gap would bounce a resting pile).
         if d >= 0.0 && std::env::var("GAPPUSH").is_err() {
+            if std::env::var("NEAR").is_ok() && self.probe.is_none() && self.phase != SoftContactPhase::Final {
+                let ahead = if self.phase == SoftContactPhase::Substep { 0.0 } else { ahead };
+                let travel = if self.phase == SoftContactPhase::Substep {
+                    (0..3).map(|k| q[k] * (t.x.get(corners[k]) - t.start[corners[k]].vec3())).sum::<Vec3>()
+                } else {
+                    ahead * (0..3).map(|k| q[k] * t.v.get(corners[k])).sum::<Vec3>()
+                };
+                self.supports.borrow_mut().push(SoftSupport {
+                    particle: i as u32,
+                    normal: n,
+                    partner: self.partner,
+                    corners: corners.map(|j| j as u32),
+                    weights: q,
+                    travel,
+                    inv_mass: w_t,
+                    friction: self.friction,
+                    pushed: 0.0,
+                });
+            }
             return None;
         }
         let depth = if std::env::var("GAPPUSH").is_ok() {
@@ -562,10 +740,56 @@ impl Contact {
                 travel(p, i) - (0..3).map(|k| q[k] * travel(t, corners[k])).sum::<Vec3>();
             let slip = relative_motion - n * relative_motion.dot(n);
             let slip_length = slip.length();
-            if slip_length > 0.0 && std::env::var("NOFRIC").is_err() {
-                let held = (self.friction * depth / slip_length).min(1.0);
-                moved(-slip * (held / w));
+            let anchor = p.anchors.get(i);
+            let anchored = std::env::var("ANCHOR").is_ok()
+                && anchor.partner == self.partner
+                && anchor.pass + 1 >= p.pass;
+            let mut held_fully = false;
+            if anchored {
+                // Static friction: back on the anchor if it is within reach.
+                let point: Vec3 = (0..3)
+                    .map(|k| anchor.weights[k] * t.x.get(anchor.corners[k] as usize))
+                    .sum();
+                let offset = p.x.get(i) - point;
+                let tangential = offset - n * offset.dot(n);
+                if tangential.length_squared() <= (self.friction * depth).powi(2) {
+                    moved(-tangential / w);
+                    held_fully = true;
+                    p.anchors.set(i, SoftAnchor { pass: p.pass, ..anchor });
+                }
             }
+            if !held_fully {
+                if slip_length > 0.0 && std::env::var("NOFRIC").is_err() {
+                    let held = (self.friction * depth / slip_length).min(1.0);
+                    moved(-slip * (held / w));
+                }
+                let q_end = closest_barycentric(
+                    p.x.get(i),
+                    t.x.get(corners[0]),
+                    t.x.get(corners[1]),
+                    t.x.get(corners[2]),
+                );
+                p.anchors.set(
+                    i,
+                    SoftAnchor {
+                        partner: self.partner,
+                        corners: corners.map(|j| j as u32),
+                        weights: q_end,
+                        pass: p.pass,
+                    },
+                );
+            }
+            self.supports.borrow_mut().push(SoftSupport {
+                particle: i as u32,
+                normal: n,
+                partner: self.partner,
+                corners: corners.map(|j| j as u32),
+                weights: q,
+                travel: (0..3).map(|k| q[k] * travel(t, corners[k])).sum(),
+                inv_mass: w_t,
+                friction: self.friction,
+                pushed: 0.0,
+            });
             return Some(n);
         }
         // An impulse (per unit mass of the pair) on the particle, and its opposite shared by
@@ -581,8 +805,36 @@ impl Contact {
         let normal_impulse = match self.phase {
             SoftContactPhase::Predicted(h) => {
                 let existing = surface_distance(x, now).map_or(0.0, |(d_now, ..)| -d_now);
-                let lambda = bounded_correction(depth, existing, h) / h / w;
+                let lambda = if std::env::var("RELAX").is_ok() {
+                    // Speculative: the approach may close the gap; a penetration the
+                    // substep started with is moved out, leaving no velocity behind.
+                    let gap = if existing.is_finite() { -existing } else { 0.0 };
+                    let target = if gap > 0.0 { -gap / h } else { 0.0 };
+                    let lambda = ((target - relative().dot(n)) / w).max(0.0);
+                    if gap < 0.0 {
+                        let shift = (-gap).min(std::env::var("RELAXMAX").map(|v| v.parse::<f32>().unwrap()).unwrap_or(f32::INFINITY) * h) / w;
+                        p.x.set(i, p.x.get(i) + n * (shift * w_p));
+                        for k in 0..3 {
+                            let j = corners[k];
+                            t.x.set(j, t.x.get(j) - n * (shift * q[k] * t.w[j]));
+                        }
+                    }
+                    lambda
+                } else {
+                    bounded_correction(depth, existing, h) / h / w
+                };
                 push(n * lambda);
+                self.supports.borrow_mut().push(SoftSupport {
+                    particle: i as u32,
+                    normal: n,
+                    partner: self.partner,
+                    corners: corners.map(|j| j as u32),
+                    weights: q,
+                    travel: h * (0..3).map(|k| q[k] * t.v.get(corners[k])).sum::<Vec3>(),
+                    inv_mass: w_t,
+                    friction: self.friction,
+                    pushed: 0.0,
+                });
                 lambda
             }
             SoftContactPhase::Substep => unreachable!("handled above"),
@@ -662,6 +914,7 @@ pub fn shape_pass_together<B: DerefMut<Target = SoftBodyState>>(
                 body.substep_finish(&plan, spheres, parallel);
             }
         }
+        apply_soft_reactions(bodies);
     }
     for body in bodies.iter_mut() {
         if body.scratch.substep_plan.take().is_some() {
@@ -904,8 +1157,10 @@ mod debug_tests {
             let size: f32 = std::env::var("SIZE")
                 .map(|v| v.parse().unwrap())
                 .unwrap_or(0.3);
+            let ny: u32 = std::env::var("NY").map(|v| v.parse().unwrap()).unwrap_or(6);
+            let c = Vec3::new(c.x, c.y * ny as f32 / 6.0, c.z);
             let mesh =
-                crate::core::box_grid(UVec3::splat(6), Vec3::splat(size / 6.0), c * (size / 0.3))
+                crate::core::box_grid(UVec3::new(6, ny, 6), Vec3::splat(size / 6.0), c * (size / 0.3))
                     .unwrap();
             let e: f32 = std::env::var("E")
                 .map(|v| v.parse().unwrap())
@@ -922,7 +1177,14 @@ mod debug_tests {
         } else {
             Vec3::new(0.03, 0.32, -0.02)
         };
-        let mut bodies = [mk(Vec3::ZERO), mk(off)];
+        let mut bodies = vec![mk(Vec3::ZERO), mk(off)];
+        if std::env::var("THREE").is_ok() {
+            bodies.push(mk(off * 2.0 - Vec3::new(0.0, -0.0, 0.0)));
+        }
+        if std::env::var("WIDE").is_ok() {
+            let mesh = crate::core::box_grid(UVec3::new(12, 6, 12), Vec3::splat(0.05), Vec3::new(-0.15, 0.0, -0.15)).unwrap();
+            bodies[0] = SoftBodyState::new(mesh.into(), bodies[0].material().clone()).unwrap();
+        }
         if std::env::var("SINGLE").is_ok() {
             bodies[0].set_soft_contact_settings(None);
             bodies[1].set_soft_contact_settings(None);
@@ -936,8 +1198,55 @@ mod debug_tests {
         }
         let g = Vec3::new(0.0, -9.81, 0.0);
         let h = 1.0 / 60.0;
-        for step in 0..240 {
+        for step in 0..std::env::var("STEPS").map(|v| v.parse().unwrap()).unwrap_or(240) {
             let c = step_bodies(&mut bodies, h, g, &ground, &Serial);
+            if let Ok(pi) = std::env::var("WATCH").map(|v| v.parse::<usize>().unwrap()) {
+                if step >= 150 && step < 156 {
+                    let b = &bodies[1];
+                    println!("  watch {step} x {:.4} v {:.3} n {:.2} sleeping {}", b.positions()[pi], b.velocities()[pi], b.contact_normals[pi], b.is_sleeping());
+                }
+            }
+            if std::env::var("ARGMAX").is_ok() && step % 20 == 0 {
+                let b = &bodies[1];
+                let mut order: Vec<usize> = (0..b.velocities().len()).collect();
+                order.sort_by(|&x, &y| b.velocities()[y].length().total_cmp(&b.velocities()[x].length()));
+                for &i in order.iter().take(4) {
+                    println!("  step {step} p{i} rest {:.3} x {:.4} v {:.3} n {:.2}", b.mesh().positions()[i], b.positions()[i], b.velocities()[i], b.contact_normals[i]);
+                }
+            }
+            if std::env::var("TRACE").is_ok() && step < 60 {
+                let lo_top = bodies[0].positions().iter().map(|x| x.y).fold(f32::MIN, f32::max);
+                let up_bot = bodies[1].positions().iter().map(|x| x.y).fold(f32::MAX, f32::min);
+                let up = &bodies[1];
+                // Tilt: the upper's top centre minus bottom centre (rest y 0.32 vs 0.62).
+                let (mut top, mut bot, mut nt, mut nb) = (Vec3::ZERO, Vec3::ZERO, 0.0, 0.0);
+                for (i, r) in up.mesh().positions().iter().enumerate() {
+                    if r.y > 0.61 { top += up.positions()[i]; nt += 1.0; }
+                    if r.y < 0.33 { bot += up.positions()[i]; nb += 1.0; }
+                }
+                let axis = (top / nt - bot / nb).normalize();
+                println!("{step} upper c {:.3} bottom {:.4} lower top {:.4} axis {:.3} contacts {c}", up.centre_of_mass(), up_bot, lo_top, axis);
+                if std::env::var("PROFILE").is_ok() && step % 3 == 2 && step < 30 {
+                    let lo = &bodies[0];
+                    let mut row = String::new();
+                    for (i, r) in lo.mesh().positions().iter().enumerate() {
+                        if r.y > 0.29 && (r.z - 0.15).abs() < 0.01 {
+                            let x = lo.positions()[i];
+                            row += &format!(" ({:.3},{:.3})", x.x, x.y);
+                        }
+                    }
+                    println!("   lower top z=.15: {row}");
+                    let mut row = String::new();
+                    for (i, r) in up.mesh().positions().iter().enumerate() {
+                        let r = *r - Vec3::new(0.03, 0.32, -0.02);
+                        if r.y < 0.01 && (r.z - 0.15).abs() < 0.01 {
+                            let x = up.positions()[i];
+                            row += &format!(" ({:.3},{:.3})", x.x, x.y);
+                        }
+                    }
+                    println!("   upper bottom z=.15: {row}");
+                }
+            }
             if std::env::var("MOM").is_ok() && step < 80 {
                 let px: Vec3 = bodies[1].velocities().iter().zip(bodies[1].masses()).map(|(v, m)| *m * *v).sum();
                 let p0: Vec3 = bodies[0].velocities().iter().zip(bodies[0].masses()).map(|(v, m)| *m * *v).sum();
@@ -959,10 +1268,13 @@ mod debug_tests {
                         .iter()
                         .map(|v| v.length())
                         .fold(0.0f32, f32::max),
-                    super::tests::deepest(&bodies),
+                    super::tests::deepest(&bodies) + 1000.0 * (bodies[1].velocities().iter().map(|v| v.length_squared()).sum::<f32>() / bodies[1].velocities().len() as f32).sqrt().floor() / 1000.0 * 0.0 + { println!("   rms {:.4} {:.4}", (bodies[0].velocities().iter().map(|v| v.length_squared()).sum::<f32>() / bodies[0].velocities().len() as f32).sqrt(), (bodies[1].velocities().iter().map(|v| v.length_squared()).sum::<f32>() / bodies[1].velocities().len() as f32).sqrt()); 0.0 },
                     bodies[0].volume_metrics().volume_error_pct,
                     bodies[1].volume_metrics().volume_error_pct
                 );
+                if bodies.len() > 2 {
+                    println!("   third {:.3} vol {:.2} vmax {:.3}", bodies[2].centre_of_mass(), bodies[2].volume_metrics().volume_error_pct, bodies[2].velocities().iter().map(|v| v.length()).fold(0.0f32, f32::max));
+                }
             }
         }
     }

@@ -329,7 +329,9 @@ impl SoftBodyState {
         self.per_tet_impulses(hs, spheres, parallel);
         // `push`: what the static colliders pushed back, which gets its friction
         // (`support_friction`).
-        let (mut along, mut squared, mut push) = (0.0f64, 0.0f64, Vec3::ZERO);
+        // Pushes into another body come out here, to be handed to it (`soft_support`).
+        let soft_push = self.take_soft_pushes();
+        let (mut along, mut squared, mut push) = (0.0f64, 0.0f64, -soft_push);
         for ((&v, &before), &m) in self
             .velocities
             .iter()
@@ -355,6 +357,7 @@ impl SoftBodyState {
             self.positions[i] += hs * (full + friction);
             self.velocities[i] = v + friction;
         }
+        self.hand_soft_pushes(hs, k);
     }
 
     /// One Gauss-Seidel pass over the edge constraints, each of compliance
