@@ -168,6 +168,9 @@ pub(crate) struct StepScratch {
     pub(crate) soft_anchors: Vec<crate::core::soft_contacts::SoftAnchor>,
     /// The number of substep soft-contact passes so far: which anchors are current.
     pub(crate) soft_pass: u32,
+    /// Per particle, the velocity the volume impulses' pushes into another soft body lost to
+    /// `constrain_direction` in this substep: what is handed to that body.
+    pub(crate) soft_removed: Vec<Vec3>,
 }
 
 impl SoftBodyState {
@@ -233,6 +236,7 @@ impl SoftBodyState {
                 soft_reactions: Vec::new(),
                 soft_anchors: vec![crate::core::soft_contacts::SoftAnchor::NONE; n],
                 soft_pass: 1,
+                soft_removed: vec![Vec3::ZERO; n],
                 substep_velocities: vec![Vec3::ZERO; n],
                 static_contact: vec![[0.0; 2]; n],
                 shape_bundles: shape_bundles(&mesh),

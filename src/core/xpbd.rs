@@ -325,6 +325,7 @@ impl SoftBodyState {
         self.scratch
             .substep_velocities
             .copy_from_slice(&self.velocities);
+        self.scratch.soft_removed.fill(Vec3::ZERO);
         self.one_ring_impulses(hs, spheres, parallel);
         self.per_tet_impulses(hs, spheres, parallel);
         // `push`: what the static colliders pushed back, which gets its friction

@@ -97,6 +97,9 @@ pub enum ImpulseOutcome {
     },
 }
 
+/// `contact_sphere` of a particle touching another soft body (no sphere has this index).
+pub(crate) const SOFT_CONTACT: u32 = u32::MAX - 1;
+
 /// What a volume pass does with one task's row of items (vertices or tet bundles; see
 /// `SoftBodyState::run_blocks`), given the row's place in the flat list of items.
 type BlockImpulses<'a> = dyn Fn(&VolumePass, &mut PassWorker, &[u32], usize) + Sync + 'a;
@@ -160,6 +163,8 @@ pub(crate) struct VolumePass<'a> {
     contact_normals: &'a [Vec3],
     contact_kept: &'a [f32],
     contact_sphere: &'a [u32],
+    /// What `constrain_direction` took from each particle touching another soft body.
+    removed: SharedSlice<'a, Vec3>,
     any_touching: bool,
     bounds: PassRadii<'a>,
     velocities: SharedSlice<'a, Vec3>,
@@ -201,7 +206,9 @@ impl VolumePass<'_> {
     /// into it, the sphere moves along with the particle (the push was already reduced to the
     /// pair's share by `constrain_direction`), so momentum is conserved.
     #[inline(always)]
-    fn apply_velocity_change(&self, worker: &mut PassWorker, i: usize, dv: Vec3) {
+    /// `removed` is what `constrain_direction` took out of this change (kept for a particle
+    /// touching another soft body, which is handed it; see `soft_contacts.rs`).
+    fn apply_velocity_change(&self, worker: &mut PassWorker, i: usize, dv: Vec3, removed: Vec3) {
         self.velocities.set(i, self.velocities.get(i) + dv);
         let predicted_position = self.predicted.get(i).vec3() + self.h * dv;
         self.predicted.set(i, Point4::new(predicted_position));
@@ -215,6 +222,9 @@ impl VolumePass<'_> {
             self.drift.set(i, drift);
         }
         let k = self.contact_sphere[i];
+        if k == SOFT_CONTACT {
+            self.removed.set(i, self.removed.get(i) + removed);
+        }
         if k != u32::MAX
             && let Some(sphere_dv) = worker.sphere_dv.get_mut(k as usize)
         {

@@ -217,6 +217,7 @@ impl SoftBodyState {
             let block_drift =
                 unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.block_drift) };
             let ring_corrected = unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) };
+            let removed = unsafe { SharedSlice::new(&mut self.scratch.soft_removed) };
             let far = FarDriftMarks {
                 marks: &self.scratch.clamp_motion.far_nearby.0,
                 pass: self.scratch.clamp_motion.pass_number,
@@ -299,6 +300,7 @@ impl SoftBodyState {
                             contact_normals,
                             contact_kept,
                             contact_sphere,
+                            removed,
                             any_touching,
                             bounds,
                             velocities,
@@ -457,6 +459,7 @@ impl SoftBodyState {
             contact_normals: &self.contact_normals,
             contact_kept: &self.contact_kept,
             contact_sphere: &self.contact_sphere,
+            removed: unsafe { SharedSlice::new(&mut self.scratch.soft_removed) },
             any_touching: !self.touching.is_empty(),
             // SAFETY (for the view and every `SharedSlice`): this function's caller's promise.
             bounds: unsafe { self.scratch.clamp_bounds.view(ClampRegions::Rings) },

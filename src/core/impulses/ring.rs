@@ -12,6 +12,8 @@ pub(crate) struct RingWork {
     inv_masses: Vec<f32>,
     /// The summed directions `D_i`.
     directions: Vec<Vec3>,
+    /// The directions before `constrain_direction`.
+    original: Vec<Vec3>,
     tets: Vec<RingLanes>,
 }
 
@@ -23,6 +25,7 @@ impl RingWork {
             predicted: vec![Point4::default(); n],
             inv_masses: vec![0.0; n],
             directions: vec![Vec3::ZERO; n + 1],
+            original: vec![Vec3::ZERO; n + 1],
             tets: vec![RingLanes::default(); mesh.max_one_ring().div_ceil(LANES)],
         }
     }
@@ -271,6 +274,7 @@ impl VolumePass<'_> {
         }
         if self.any_touching {
             for (k, &i) in vertices.iter().enumerate() {
+                work.original[k] = work.directions[k];
                 work.directions[k] = self.constrain_direction(i as usize, work.directions[k]);
             }
         }
@@ -328,8 +332,14 @@ impl VolumePass<'_> {
         worker.counters.rings_clamped += clamped as u32;
         let scale = (step / self.h as f64) as f32;
         for (k, &i) in vertices.iter().enumerate() {
-            let dv = scale * worker.ring_work.directions[k];
-            self.apply_velocity_change(worker, i as usize, dv);
+            let work = &worker.ring_work;
+            let dv = scale * work.directions[k];
+            let removed = if self.any_touching {
+                scale * (work.original[k] - work.directions[k])
+            } else {
+                Vec3::ZERO
+            };
+            self.apply_velocity_change(worker, i as usize, dv, removed);
         }
         ImpulseOutcome::Applied {
             step,

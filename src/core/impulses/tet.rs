@@ -65,6 +65,7 @@ impl VolumePass<'_> {
             }));
             g[k].scale(-w * c)
         });
+        let original = d;
         if self.any_touching {
             // `constrain_direction` in lanes: a particle touching nothing has a zero normal.
             for (k, dk) in d.iter_mut().enumerate() {
@@ -83,6 +84,7 @@ impl VolumePass<'_> {
         let (volume, v0) = (volume.to_array(), v0.to_array());
         let (c1, c2, c3) = (c1.to_array(), c2.to_array(), c3.to_array());
         let d = d.map(Vec3x4::to_vecs);
+        let original = original.map(Vec3x4::to_vecs);
         for l in 0..LANES {
             if act & (1 << l) == 0 {
                 continue;
@@ -125,7 +127,8 @@ impl VolumePass<'_> {
             worker.counters.tets_clamped += clamped as u32;
             let scale = (step / self.h as f64) as f32;
             for k in 0..4 {
-                self.apply_velocity_change(worker, tet[k] as usize, scale * dl[k]);
+                let removed = scale * (original[k][l] - dl[k]);
+                self.apply_velocity_change(worker, tet[k] as usize, scale * dl[k], removed);
             }
             outcomes[l] = ImpulseOutcome::Applied {
                 step,
