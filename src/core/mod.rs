@@ -48,8 +48,7 @@ pub use parallel::{Parallel, Serial};
 pub use runaway::{Runaway, RunawayLimits};
 pub use sleep::SleepSettings;
 pub use soft_contacts::{
-    SoftContactPhase, prepare_soft_pass, resolve_pair, resolve_self, shape_pass_together,
-    soft_contact_pass, step_bodies,
+    LockstepBody, contact_stage_together, final_contacts_together, step_bodies,
 };
 pub use step::Stage;
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};

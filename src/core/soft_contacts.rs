@@ -37,7 +37,7 @@ use super::colliders::{ColliderInstance, RigidSphereState};
 use super::contacts::MAX_DEPENETRATION_SPEED;
 use super::impulses::SOFT_CONTACT;
 use super::lanes::Point4;
-use super::parallel::{Parallel, SharedSlice};
+use super::parallel::{Parallel, Serial, SharedSlice};
 use super::step::Stage;
 
 /// A particle's contact with another body's triangle in a substep: what the volume impulses'
@@ -70,7 +70,7 @@ pub struct SoftReaction {
 
 /// Which of a step's two soft-contact passes runs (see the module's documentation).
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub enum SoftContactPhase {
+pub(crate) enum SoftContactPhase {
     /// Before the contact stage of a step of `h`: on `x + h v`, changing velocities.
     Predicted(f32),
     /// After integration: on `x`, moving particles apart and stopping their approach.
@@ -280,7 +280,7 @@ impl<'a> Arrays<'a> {
 
 /// One pass of soft contacts among `bodies` (every pair whose bounds overlap, and each body
 /// with itself where it asks for it), in the order of the slice. Returns the contacts.
-pub fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
+pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
     bodies: &mut [B],
     phase: SoftContactPhase,
 ) -> u32 {
@@ -306,7 +306,7 @@ pub fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
 /// Prepares `body` for a pass of `phase` (its triangle grid); returns its bounds, if it takes
 /// part. The plugin calls this on every body, then [`resolve_pair`] on the overlapping pairs
 /// and [`resolve_self`] on each body.
-pub fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) -> Option<Aabb> {
+fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) -> Option<Aabb> {
     if phase != SoftContactPhase::Final {
         body.scratch.soft_supports.clear();
     }
@@ -327,7 +327,7 @@ pub fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) -> O
 
 /// Contacts between two different bodies (both ways: `a`'s particles against `b`'s triangles,
 /// then `b`'s against `a`'s), whose prepared bounds are `ra` and `rb`.
-pub fn resolve_pair(
+fn resolve_pair(
     a: &mut SoftBodyState,
     b: &mut SoftBodyState,
     phase: SoftContactPhase,
@@ -396,7 +396,7 @@ pub fn resolve_pair(
 }
 
 /// Contacts of a body with itself, if it asks for them.
-pub fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) -> u32 {
+fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) -> u32 {
     let Some(settings) = body.soft_contacts.filter(|s| s.self_contacts) else {
         return 0;
     };
@@ -730,62 +730,114 @@ impl Contact {
     }
 }
 
-/// The contact stage of bodies that may touch each other: their substeps run in lockstep
-/// (as many as the most any of them needs), and after each substep's shape solve a two-way
-/// soft-contact pass on the substep's predicted positions, before each body's own contacts and
-/// volume impulses, as the ground meets a single body. Bodies not solved in substeps (the
-/// paper's springs) take no part here. Returns the contacts.
-pub fn shape_pass_together<B: DerefMut<Target = SoftBodyState>>(
-    bodies: &mut [B],
+/// A body stepped in lockstep with others, with its own copy of the rigid spheres (which it
+/// pushes as it would alone; the plugin merges every body's pushes after the stage).
+pub struct LockstepBody<'a> {
+    /// The body.
+    pub state: &'a mut SoftBodyState,
+    /// Its copy of the rigid spheres.
+    pub spheres: &'a mut [RigidSphereState],
+}
+
+impl std::ops::Deref for LockstepBody<'_> {
+    type Target = SoftBodyState;
+    fn deref(&self) -> &SoftBodyState {
+        self.state
+    }
+}
+
+impl DerefMut for LockstepBody<'_> {
+    fn deref_mut(&mut self) -> &mut SoftBodyState {
+        self.state
+    }
+}
+
+/// Runs `job` on every body of `bodies`, one body per job of `parallel`.
+fn for_each_lockstep(
+    bodies: &mut [LockstepBody],
+    parallel: &dyn Parallel,
+    job: &(dyn Fn(&mut LockstepBody) + Sync),
+) {
+    let count = bodies.len();
+    // SAFETY: each job reaches its own body alone.
+    let shared = unsafe { SharedSlice::new(bodies) };
+    parallel.run(count, &|i| job(unsafe { shared.get_mut(i) }));
+}
+
+/// [`Stage::Contacts`] for bodies that may touch each other (the plugin's groups of bodies whose
+/// bounds overlap): a soft-contact pass on the predicted positions `x + h v` (for the paper's
+/// springs, which are not substepped, the only one before their volume passes), each body's
+/// contacts outside substeps, then the substepped bodies' substeps in lockstep, as many as the
+/// most any of them needs. In each substep every body's shape solve runs, then one two-way
+/// soft-contact pass on the predicted positions, then each body's own contacts and volume
+/// impulses, then what those impulses pushed into other bodies is handed to them. The bodies
+/// run one per job of `parallel` (their blocks on one thread each) wherever they do not touch
+/// each other's data, and the contact passes in order, so the result does not depend on it.
+/// Returns the contacts.
+pub fn contact_stage_together(
+    bodies: &mut [LockstepBody],
     h: f32,
-    spheres: &mut [RigidSphereState],
     colliders: &[ColliderInstance],
     parallel: &dyn Parallel,
 ) -> u32 {
+    let mut contacts = soft_contact_pass(bodies, SoftContactPhase::Predicted(h));
+    for body in bodies.iter_mut() {
+        let b = &mut *body;
+        contacts += b
+            .state
+            .resolve_contacts_outside_substeps(h, b.spheres, colliders, &Serial);
+    }
     let substeps = bodies
         .iter()
-        .filter_map(|b| b.substeps_needed(h, spheres, colliders))
+        .filter_map(|b| b.state.substeps_needed(h, b.spheres, colliders))
         .max();
     let Some(substeps) = substeps else {
-        return 0;
+        return contacts;
     };
     for body in bodies.iter_mut() {
-        body.scratch.substep_plan = body.plan_substeps(h, spheres, colliders, Some(substeps));
+        let plan = body
+            .state
+            .plan_substeps(h, body.spheres, colliders, Some(substeps));
+        body.state.scratch.substep_plan = plan;
     }
-    let mut contacts = 0;
+    let found = std::sync::atomic::AtomicU32::new(0);
     for k in 0..substeps {
-        for body in bodies.iter_mut() {
-            if let Some(plan) = body.scratch.substep_plan {
-                body.substep_motion(&plan, k);
+        for_each_lockstep(bodies, parallel, &|body| {
+            if let Some(plan) = body.state.scratch.substep_plan {
+                body.state.substep_motion(&plan, k);
             }
-        }
+        });
         contacts += soft_contact_pass(bodies, SoftContactPhase::Substep);
-        for body in bodies.iter_mut() {
-            if let Some(plan) = body.scratch.substep_plan {
-                body.substep_velocities(&plan);
+        for_each_lockstep(bodies, parallel, &|body| {
+            if let Some(plan) = body.state.scratch.substep_plan {
+                body.state.substep_velocities(&plan);
+                let c = body.state.substep_contacts(&plan, k, body.spheres, colliders);
+                body.state.substep_finish(&plan, body.spheres, &Serial);
+                found.fetch_add(c, std::sync::atomic::Ordering::Relaxed);
             }
-        }
-        for body in bodies.iter_mut() {
-            if let Some(plan) = body.scratch.substep_plan {
-                contacts += body.substep_contacts(&plan, k, spheres, colliders);
-                body.substep_finish(&plan, spheres, parallel);
-            }
-        }
+        });
         apply_soft_reactions(bodies);
     }
     for body in bodies.iter_mut() {
-        if body.scratch.substep_plan.take().is_some() {
-            body.update_sleep(h, spheres, colliders);
+        if body.state.scratch.substep_plan.take().is_some() {
+            body.state.update_sleep(h, body.spheres, colliders);
         }
     }
-    contacts
+    contacts + found.into_inner()
 }
 
-/// A whole step of several bodies that meet each other, in the plugin's order: a soft-contact
-/// pass on the predicted positions before the contact stage, the contact stage's substeps
-/// in lockstep ([`shape_pass_together`]), each body's other stages ([`Stage::ORDER`]), and a
-/// pass on the final positions after integration. For using the core without Bevy, and for
-/// tests and benchmarks of piles.
+/// The soft-contact pass that ends a step of bodies stepped together (after
+/// [`Stage::Integrate`]): on the positions the step ended at, moving penetrating particles
+/// apart and stopping their approach, so that no particle ends a step inside another body.
+/// Returns the contacts.
+pub fn final_contacts_together(bodies: &mut [LockstepBody]) -> u32 {
+    soft_contact_pass(bodies, SoftContactPhase::Final)
+}
+
+/// A whole step of several bodies that meet each other, in the plugin's order: the contact
+/// stage together ([`contact_stage_together`]), each body's other stages ([`Stage::ORDER`]),
+/// and the final pass ([`final_contacts_together`]). For using the core without Bevy, and
+/// for tests and benchmarks of piles.
 pub fn step_bodies(
     bodies: &mut [SoftBodyState],
     h: f32,
@@ -793,25 +845,29 @@ pub fn step_bodies(
     colliders: &[ColliderInstance],
     parallel: &dyn Parallel,
 ) -> u32 {
-    let mut bodies: Vec<&mut SoftBodyState> = bodies.iter_mut().collect();
+    let mut bodies: Vec<LockstepBody> = bodies
+        .iter_mut()
+        .map(|state| LockstepBody {
+            state,
+            spheres: &mut [],
+        })
+        .collect();
     let mut contacts = 0;
     for body in bodies.iter_mut() {
-        body.begin_step();
+        body.state.begin_step();
     }
     for stage in Stage::ORDER {
         if stage == Stage::Contacts {
-            contacts += soft_contact_pass(&mut bodies, SoftContactPhase::Predicted(h));
-            for body in bodies.iter_mut() {
-                contacts += body.resolve_contacts_outside_substeps(h, &mut [], colliders, parallel);
-            }
-            contacts += shape_pass_together(&mut bodies, h, &mut [], colliders, parallel);
+            contacts += contact_stage_together(&mut bodies, h, colliders, parallel);
             continue;
         }
         for body in bodies.iter_mut() {
-            contacts += body.run_stage(stage, h, gravity, &mut [], colliders, parallel);
+            contacts += body
+                .state
+                .run_stage(stage, h, gravity, &mut [], colliders, &Serial);
         }
         if stage == Stage::Integrate {
-            contacts += soft_contact_pass(&mut bodies, SoftContactPhase::Final);
+            contacts += final_contacts_together(&mut bodies);
         }
     }
     contacts
