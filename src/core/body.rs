@@ -171,6 +171,8 @@ pub(crate) struct StepScratch {
     /// Per particle, the velocity the volume impulses' pushes into another soft body lost to
     /// `constrain_direction` in this substep: what is handed to that body.
     pub(crate) soft_removed: Vec<Vec3>,
+    /// The soft contacts of this body's particles since the count was last taken.
+    pub(crate) soft_count: u32,
 }
 
 impl SoftBodyState {
@@ -237,6 +239,7 @@ impl SoftBodyState {
                 soft_anchors: vec![crate::core::soft_contacts::SoftAnchor::NONE; n],
                 soft_pass: 1,
                 soft_removed: vec![Vec3::ZERO; n],
+                soft_count: 0,
                 substep_velocities: vec![Vec3::ZERO; n],
                 static_contact: vec![[0.0; 2]; n],
                 shape_bundles: shape_bundles(&mesh),

@@ -123,6 +123,7 @@ impl SoftBodyState {
     /// keep none of a push into the other body, as against the ground: pushes into it that the
     /// next contact pass would turn into velocity pump energy into a pile.
     fn record_soft_contacts(&mut self) {
+        self.scratch.soft_count += self.scratch.soft_touched.len() as u32;
         for k in 0..self.scratch.soft_touched.len() {
             let (i, n) = self.scratch.soft_touched[k];
             self.record_contact(i as usize, n, 0.0, None);
@@ -338,7 +339,9 @@ fn resolve_pair(
     let (Some(sa), Some(sb)) = (a.soft_contacts, b.soft_contacts) else {
         return 0;
     };
-    if a.is_sleeping() && b.is_sleeping() {
+    if (a.is_sleeping() && b.is_sleeping())
+        || !a.collision_filter.interacts_with(b.collision_filter)
+    {
         return 0;
     }
     let thickness = sa.thickness.max(sb.thickness);
@@ -737,6 +740,28 @@ pub struct LockstepBody<'a> {
     pub state: &'a mut SoftBodyState,
     /// Its copy of the rigid spheres.
     pub spheres: &'a mut [RigidSphereState],
+    /// The contacts its particles made in the stage (soft, static, spheres, rigid bodies).
+    pub contacts: u32,
+}
+
+impl<'a> LockstepBody<'a> {
+    /// `state` with its copy of the spheres, no contacts counted yet.
+    pub fn new(state: &'a mut SoftBodyState, spheres: &'a mut [RigidSphereState]) -> Self {
+        LockstepBody {
+            state,
+            spheres,
+            contacts: 0,
+        }
+    }
+}
+
+/// A soft-contact pass of `phase` among `bodies`, each body's contacts counted on it.
+fn counted_pass(bodies: &mut [LockstepBody], phase: SoftContactPhase) -> u32 {
+    let contacts = soft_contact_pass(bodies, phase);
+    for body in bodies.iter_mut() {
+        body.contacts += std::mem::take(&mut body.state.scratch.soft_count);
+    }
+    contacts
 }
 
 impl std::ops::Deref for LockstepBody<'_> {
@@ -780,10 +805,12 @@ pub fn contact_stage_together(
     colliders: &[ColliderInstance],
     parallel: &dyn Parallel,
 ) -> u32 {
-    let mut contacts = soft_contact_pass(bodies, SoftContactPhase::Predicted(h));
+    let counted = |bodies: &[LockstepBody]| bodies.iter().map(|b| b.contacts).sum::<u32>();
+    let before = counted(bodies);
+    counted_pass(bodies, SoftContactPhase::Predicted(h));
     for body in bodies.iter_mut() {
         let b = &mut *body;
-        contacts += b
+        b.contacts += b
             .state
             .resolve_contacts_outside_substeps(h, b.spheres, colliders, &Serial);
     }
@@ -792,7 +819,7 @@ pub fn contact_stage_together(
         .filter_map(|b| b.state.substeps_needed(h, b.spheres, colliders))
         .max();
     let Some(substeps) = substeps else {
-        return contacts;
+        return counted(bodies) - before;
     };
     for body in bodies.iter_mut() {
         let plan = body
@@ -800,20 +827,18 @@ pub fn contact_stage_together(
             .plan_substeps(h, body.spheres, colliders, Some(substeps));
         body.state.scratch.substep_plan = plan;
     }
-    let found = std::sync::atomic::AtomicU32::new(0);
     for k in 0..substeps {
         for_each_lockstep(bodies, parallel, &|body| {
             if let Some(plan) = body.state.scratch.substep_plan {
                 body.state.substep_motion(&plan, k);
             }
         });
-        contacts += soft_contact_pass(bodies, SoftContactPhase::Substep);
+        counted_pass(bodies, SoftContactPhase::Substep);
         for_each_lockstep(bodies, parallel, &|body| {
             if let Some(plan) = body.state.scratch.substep_plan {
                 body.state.substep_velocities(&plan);
-                let c = body.state.substep_contacts(&plan, k, body.spheres, colliders);
+                body.contacts += body.state.substep_contacts(&plan, k, body.spheres, colliders);
                 body.state.substep_finish(&plan, body.spheres, &Serial);
-                found.fetch_add(c, std::sync::atomic::Ordering::Relaxed);
             }
         });
         apply_soft_reactions(bodies);
@@ -823,7 +848,7 @@ pub fn contact_stage_together(
             body.state.update_sleep(h, body.spheres, colliders);
         }
     }
-    contacts + found.into_inner()
+    counted(bodies) - before
 }
 
 /// The soft-contact pass that ends a step of bodies stepped together (after
@@ -831,7 +856,7 @@ pub fn contact_stage_together(
 /// apart and stopping their approach, so that no particle ends a step inside another body.
 /// Returns the contacts.
 pub fn final_contacts_together(bodies: &mut [LockstepBody]) -> u32 {
-    soft_contact_pass(bodies, SoftContactPhase::Final)
+    counted_pass(bodies, SoftContactPhase::Final)
 }
 
 /// A whole step of several bodies that meet each other, in the plugin's order: the contact
@@ -847,10 +872,7 @@ pub fn step_bodies(
 ) -> u32 {
     let mut bodies: Vec<LockstepBody> = bodies
         .iter_mut()
-        .map(|state| LockstepBody {
-            state,
-            spheres: &mut [],
-        })
+        .map(|state| LockstepBody::new(state, &mut []))
         .collect();
     let mut contacts = 0;
     for body in bodies.iter_mut() {
