@@ -58,6 +58,9 @@ pub struct SoftBody {
     /// For each rigid body in the body's `RigidContacts`, its index among the step's rigid
     /// bodies ([`SolverSpheres`](crate::plugin::SolverSpheres)'s `rigid`).
     pub(crate) rigid_ids: Vec<u32>,
+    /// Whether this step's contact stage runs the body with others that may touch it
+    /// (`plugin::groups`).
+    pub(crate) stepped_together: bool,
 }
 
 impl SoftBody {
@@ -70,6 +73,7 @@ impl SoftBody {
             step_time: Duration::ZERO,
             spheres: Vec::new(),
             rigid_ids: Vec::new(),
+            stepped_together: false,
         })
     }
 

@@ -16,14 +16,17 @@ use crate::components::{
 };
 use crate::core::step::{Stage, spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
-    ColliderInstance, Parallel, RigidBodyMotion, RigidSphereState, Serial, SoftBodyState, TetMesh,
+    ColliderInstance, CollisionFilter, Parallel, RigidBodyMotion, RigidSphereState, Serial,
+    SoftBodyState, TetMesh,
 };
 
+mod groups;
 mod systems;
 mod threads;
 mod timing;
 
 pub use systems::SolverSpheres;
+use groups::*;
 use systems::*;
 pub(crate) use systems::{gather_spheres, report};
 #[cfg(test)]
@@ -135,6 +138,7 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<DrivenParticles>()
             .register_type::<RigidSphere>()
             .init_resource::<SolverSpheres>()
+            .init_resource::<SoftContactGroups>()
             .init_resource::<SoftBodyStepTime>()
             .init_resource::<SoftBodyThreads>()
             .register_type::<SoftBodyThreads>()

@@ -210,8 +210,9 @@ pub(super) fn stage_system(
     ResMut<SoftBodyStepTime>,
     Bodies,
     Res<SoftBodyThreads>,
+    ResMut<SoftContactGroups>,
 ) {
-    move |time, gravity, mut solver, mut clock, mut bodies, threads| {
+    move |time, gravity, mut solver, mut clock, mut bodies, threads, mut groups| {
         let h = time.delta_secs();
         if h <= 0.0 {
             return;
@@ -231,10 +232,17 @@ pub(super) fn stage_system(
         if bodies_work {
             let compute = ComputePool::new(&threads);
             let few = few_bodies(&bodies, &compute);
+            // Bodies that may touch each other run their contact stage together.
+            let together = stage == Stage::Contacts;
+            if together {
+                find_groups(&mut bodies, h, g, &mut groups);
+                contact_stage_of_groups(&mut bodies, &groups, solver, &compute, h);
+            }
             par_with_spheres(
                 &mut bodies,
                 solver,
                 &compute,
+                together,
                 |s, stats, spheres, colliders| {
                     let parallel = pass_parallelism(few, s, &compute);
                     if stage == Stage::ORDER[0] {
@@ -246,6 +254,9 @@ pub(super) fn stage_system(
                     }
                 },
             );
+            if stage == Stage::Integrate {
+                final_pass_of_groups(&mut bodies, &groups);
+            }
         }
         spheres_after_bodies(stage, h, &mut solver.states);
         clock.add_stage(start, stage);

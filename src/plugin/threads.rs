@@ -157,6 +157,7 @@ pub(super) fn par_with_spheres(
     bodies: &mut Bodies,
     solver: &mut SolverSpheres,
     compute: &ComputePool,
+    skip_stepped_together: bool,
     pass: impl Fn(&mut SoftBodyState, &mut SoftBodyStats, &mut [RigidSphereState], &[ColliderInstance])
     + Send
     + Sync,
@@ -175,6 +176,9 @@ pub(super) fn par_with_spheres(
         let rigid = body.state.rigid_contacts_mut();
         for (mine, &id) in rigid.bodies.iter_mut().zip(&body.rigid_ids) {
             *mine = rigid_before[id as usize];
+        }
+        if skip_stepped_together && body.stepped_together {
+            return;
         }
         pass(&mut body.state, &mut stats, &mut body.spheres, colliders);
         body.step_time += start.elapsed();
