@@ -87,7 +87,10 @@ fn particles_inside(app: &mut App, depth: f32) -> usize {
 /// another.
 #[test]
 fn a_stack_of_three_jellies_comes_to_rest() {
-    let mut app = app(Vec3::new(0.0, -9.81, 0.0), Duration::from_secs_f64(1.0 / 60.0));
+    let mut app = app(
+        Vec3::new(0.0, -9.81, 0.0),
+        Duration::from_secs_f64(1.0 / 60.0),
+    );
     app.world_mut()
         .spawn((StaticCollider::ground(0.8), Transform::default()));
     let cells = UVec3::new(6, 2, 6);
@@ -139,7 +142,13 @@ fn jellies_thrown_at_each_other_bounce_apart() {
     let b = app.world_mut().spawn((b, Transform::default())).id();
     let momentum = |app: &App| {
         [a, b]
-            .map(|e| app.world().get::<SoftBody>(e).unwrap().state().linear_momentum())
+            .map(|e| {
+                app.world()
+                    .get::<SoftBody>(e)
+                    .unwrap()
+                    .state()
+                    .linear_momentum()
+            })
             .iter()
             .sum::<Vec3>()
     };
@@ -174,6 +183,12 @@ fn a_body_without_soft_contacts_passes_through() {
     for _ in 0..30 {
         app.update();
     }
-    let x = app.world().get::<SoftBody>(a).unwrap().state().centre_of_mass().x;
+    let x = app
+        .world()
+        .get::<SoftBody>(a)
+        .unwrap()
+        .state()
+        .centre_of_mass()
+        .x;
     assert!(x > 0.9, "stopped at {x}");
 }

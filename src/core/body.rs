@@ -17,8 +17,8 @@ use super::material::{Elasticity, MaterialError, SoftBodyMaterial};
 use super::parallel::{BlockFlags, Parallel, Serial, SharedSlice};
 use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
 use super::sleep::{Sleep, SleepSettings};
+use super::soft_records::SubstepPlan;
 use super::tet_mesh::TetMesh;
-use super::xpbd::SubstepPlan;
 
 /// A particle index that does not exist in the body's mesh.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, thiserror::Error)]
@@ -161,11 +161,11 @@ pub(crate) struct StepScratch {
     /// The particles the last soft-contact pass touched and their normals (`soft_contacts.rs`).
     pub(crate) soft_touched: Vec<(u32, Vec3)>,
     /// This substep's soft contacts of this body's particles (`soft_contacts.rs`).
-    pub(crate) soft_supports: Vec<crate::core::soft_contacts::SoftSupport>,
+    pub(crate) soft_supports: Vec<crate::core::soft_records::SoftSupport>,
     /// What this body's volume impulses handed to other bodies this substep.
-    pub(crate) soft_reactions: Vec<crate::core::soft_contacts::SoftReaction>,
+    pub(crate) soft_reactions: Vec<crate::core::soft_records::SoftReaction>,
     /// Per particle, where static friction holds it on another body (`soft_contacts.rs`).
-    pub(crate) soft_anchors: Vec<crate::core::soft_contacts::SoftAnchor>,
+    pub(crate) soft_anchors: Vec<crate::core::soft_records::SoftAnchor>,
     /// The number of substep soft-contact passes so far: which anchors are current.
     pub(crate) soft_pass: u32,
     /// Per particle, the velocity the volume impulses' pushes into another soft body lost to
@@ -236,7 +236,7 @@ impl SoftBodyState {
                 soft_touched: Vec::new(),
                 soft_supports: Vec::new(),
                 soft_reactions: Vec::new(),
-                soft_anchors: vec![crate::core::soft_contacts::SoftAnchor::NONE; n],
+                soft_anchors: vec![crate::core::soft_records::SoftAnchor::NONE; n],
                 soft_pass: 1,
                 soft_removed: vec![Vec3::ZERO; n],
                 soft_count: 0,

@@ -22,6 +22,8 @@ pub(crate) mod roots;
 pub(crate) mod runaway;
 pub(crate) mod sleep;
 pub(crate) mod soft_contacts;
+pub(crate) mod soft_lockstep;
+pub(crate) mod soft_records;
 pub(crate) mod step;
 pub(crate) mod surface_mesh;
 pub(crate) mod tet_mesh;
@@ -47,7 +49,7 @@ pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
 pub use runaway::{Runaway, RunawayLimits};
 pub use sleep::SleepSettings;
-pub use soft_contacts::{
+pub use soft_lockstep::{
     LockstepBody, contact_stage_together, final_contacts_together, step_bodies,
 };
 pub use step::Stage;

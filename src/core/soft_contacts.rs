@@ -1,29 +1,35 @@
 //! Contacts between soft bodies, and of a body with itself: the boundary particles of one body
-//! against the boundary triangles of another, two-way.
+//! against the boundary triangles of another, two-way. The bodies that may touch run their
+//! contact stage together (`soft_lockstep.rs`); this file is the narrow phase and its passes.
 //!
-//! A particle closer than `thickness` to a triangle's outer side, or past it (within reach of
-//! the triangle), gets a normal impulse along the triangle's outward normal, and the triangle's
-//! three particles the opposite impulse, split by the particle's barycentric weights `b_j`:
-//! the pair's inverse mass is `w_p + sum b_j^2 w_j`, so linear momentum is conserved. Friction
-//! is Coulomb's on the relative velocity, with the two materials' combined coefficient.
+//! A particle past a triangle of another body (the nearest one, within reach of it) is pushed
+//! out along the triangle's outward normal, and the triangle's three particles the opposite
+//! way, split by the particle's barycentric weights `b_j`: the pair's inverse mass is
+//! `w_p + sum b_j^2 w_j`, so linear momentum is conserved. A step meets other bodies in three
+//! kinds of pass ([`SoftContactPhase`]):
+//! - before the contact stage, on the predicted positions `x + h v`, changing velocities (as
+//!   the contacts with colliders do), so that no body's own passes start by driving it into
+//!   another (for the paper's springs, which are not substepped, the contacts that matter);
+//! - in every substep, on the positions the shape solve predicted, moving particles apart, as
+//!   XPBD meets contacts, with static friction that holds a particle where it is on the other
+//!   body's triangle (an anchor in that triangle's barycentric coordinates, kept while the
+//!   particle stays within `mu` times its push of it: the position-based friction the ground's
+//!   contacts use, `contacts.rs`), sliding friction beyond;
+//! - after integration, on the positions the step ended at, moving penetrating particles
+//!   apart and stopping their approach, so that no particle ends a step inside another body.
 //!
-//! A step meets other bodies twice (the plugin's `Stage::Contacts` and `Stage::Integrate`, or
-//! [`step_bodies`]):
-//! - [`SoftContactPhase::Predicted`], before the contact stage: on the predicted positions
-//!   `x + h v`, changing velocities only (as the contacts with colliders do), so that the
-//!   bodies' own passes start from velocities that do not drive them into each other;
-//! - [`SoftContactPhase::Final`], after integration: on the positions the step ended at, moving
-//!   penetrating particles apart (split by inverse mass, so the centre of mass stays) and
-//!   removing their approaching normal velocity, so that no particle ends a step inside
-//!   another body. The volume passes in between keep the whole of a push into another body
-//!   (as into a rigid body, see `contacts.rs`): the neighbour is pushed back by these passes.
+//! The volume impulses of a substep see these contacts as they see the ground's: a push into
+//! the other body is taken out of the impulse before its cubic is solved
+//! (`constrain_direction`), and the momentum taken out is handed to the other body with its
+//! Coulomb friction (`soft_lockstep.rs`), so a squashed jelly in a pile keeps its volume and
+//! holds up the one above it.
 //!
-//! Broad phase: bodies whose swept bounds overlap; within a pair, each body's boundary
-//! triangles are hashed into a uniform grid (cells of about a triangle's size, built once per
-//! pass, [`TriangleGrid`]) and a particle looks only in the cells its motion covers, so the
-//! cost grows with the boundary particles in the overlap, not with their product. Self
-//! contacts skip the triangles within two rest edges of the particle at rest: those are its
-//! neighbours on the same surface, not a fold.
+//! Broad phase: bodies whose bounds overlap; within a pair, each body's boundary triangles are
+//! hashed into a uniform grid (cells of about a triangle's size, built once per pass,
+//! [`TriangleGrid`]) and a particle looks only in the cells its motion covers, so the cost
+//! grows with the boundary particles in the overlap, not with their product. Self contacts
+//! skip the triangles within two rest edges of the particle at rest: those are its neighbours
+//! on the same surface, not a fold.
 
 use std::ops::DerefMut;
 
@@ -33,40 +39,11 @@ use parry3d::bounding_volume::{Aabb, BoundingVolume};
 use super::body::SoftBodyState;
 use super::boundary::{Boundary, SoftContactSettings, TriangleGrid, closest_barycentric};
 use super::colliders::combined_friction;
-use super::colliders::{ColliderInstance, RigidSphereState};
 use super::contacts::MAX_DEPENETRATION_SPEED;
 use super::impulses::SOFT_CONTACT;
 use super::lanes::Point4;
-use super::parallel::{Parallel, Serial, SharedSlice};
-use super::step::Stage;
-
-/// A particle's contact with another body's triangle in a substep: what the volume impulses'
-/// pushes into that body are handed to (`SoftBodyState::soft_support`).
-#[derive(Clone, Copy, Debug)]
-pub struct SoftSupport {
-    pub(crate) particle: u32,
-    pub(crate) normal: Vec3,
-    pub(crate) partner: u32,
-    pub(crate) corners: [u32; 3],
-    pub(crate) weights: Vec3,
-    /// How far the triangle's point moved since the substep's start.
-    pub(crate) travel: Vec3,
-    /// The triangle point's inverse mass, `sum b_j^2 w_j`.
-    pub(crate) inv_mass: f32,
-    pub(crate) friction: f32,
-    /// The impulse the triangle gave the particle by stopping the volume impulses' push into
-    /// it (`take_soft_pushes`).
-    pub(crate) pushed: Vec3,
-}
-
-/// An impulse one body's volume impulses hand to another's triangle.
-#[derive(Clone, Copy, Debug)]
-pub struct SoftReaction {
-    pub(crate) partner: u32,
-    pub(crate) corners: [u32; 3],
-    pub(crate) weights: Vec3,
-    pub(crate) impulse: Vec3,
-}
+use super::parallel::SharedSlice;
+use super::soft_records::{SoftAnchor, SoftSupport};
 
 /// Which of a step's two soft-contact passes runs (see the module's documentation).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -155,74 +132,6 @@ impl SoftBodyState {
     }
 }
 
-impl SoftBodyState {
-    /// The impulses the other bodies gave this substep's volume impulses: what
-    /// `constrain_direction` took out of their pushes into another body (`soft_removed`),
-    /// recorded on the particle's support (its first, if it has several); returns their sum.
-    pub(crate) fn take_soft_pushes(&mut self) -> Vec3 {
-        let mut total = Vec3::ZERO;
-        for s in self.scratch.soft_supports.iter_mut() {
-            let i = s.particle as usize;
-            s.pushed = -self.masses[i] * self.scratch.soft_removed[i];
-            self.scratch.soft_removed[i] = Vec3::ZERO;
-            total += s.pushed;
-        }
-        total
-    }
-
-    /// Hands the pushes `take_soft_pushes` took out (scaled by the substep's energy scale `k`)
-    /// to the other bodies' triangles, with Coulomb friction on the particle's slip over the
-    /// triangle, both ways. The reactions wait in `soft_reactions` for the lockstep loop.
-    pub(crate) fn hand_soft_pushes(&mut self, hs: f32, k: f32) {
-        let supports = std::mem::take(&mut self.scratch.soft_supports);
-        for s in &supports {
-            if s.pushed == Vec3::ZERO {
-                continue;
-            }
-            let i = s.particle as usize;
-            let jn = k * s.pushed.dot(s.normal).max(0.0);
-            let w_p = self.inv_masses[i];
-            let w = w_p + s.inv_mass;
-            let rel = self.velocities[i] - s.travel / hs;
-            let slip = rel - s.normal * rel.dot(s.normal);
-            let slip_speed = slip.length();
-            let mut impulse = -k * s.pushed;
-            if slip_speed > 0.0 && w > 0.0 {
-                let jt = (slip_speed / w).min(s.friction * jn);
-                let dv = -slip * (jt / slip_speed) * w_p;
-                self.velocities[i] += dv;
-                self.positions[i] += hs * dv;
-                impulse += slip * (jt / slip_speed);
-            }
-            self.scratch.soft_reactions.push(SoftReaction {
-                partner: s.partner,
-                corners: s.corners,
-                weights: s.weights,
-                impulse,
-            });
-        }
-        self.scratch.soft_supports = supports;
-        self.scratch.soft_supports.clear();
-    }
-}
-
-/// Applies the reactions every body's volume impulses handed on this substep.
-pub(crate) fn apply_soft_reactions<B: DerefMut<Target = SoftBodyState>>(bodies: &mut [B]) {
-    for b in 0..bodies.len() {
-        let reactions = std::mem::take(&mut bodies[b].scratch.soft_reactions);
-        for r in &reactions {
-            let partner = &mut bodies[r.partner as usize];
-            for k in 0..3 {
-                let j = r.corners[k] as usize;
-                let w = partner.inv_masses[j];
-                partner.velocities[j] += r.impulse * (r.weights[k] * w);
-            }
-        }
-        bodies[b].scratch.soft_reactions = reactions;
-        bodies[b].scratch.soft_reactions.clear();
-    }
-}
-
 /// A body's particles as the narrow phase reads and writes them; for a self contact both
 /// sides are the same arrays (hence shared slices, read and written one element at a time on
 /// this thread).
@@ -234,25 +143,6 @@ struct Arrays<'a> {
     start: &'a [Point4],
     anchors: SharedSlice<'a, SoftAnchor>,
     pass: u32,
-}
-
-/// Where a particle's static friction holds it on another body's surface: a point of one of
-/// its triangles, set in soft-contact pass `pass`.
-#[derive(Clone, Copy, Debug)]
-pub struct SoftAnchor {
-    pub(crate) partner: u32,
-    pub(crate) corners: [u32; 3],
-    pub(crate) weights: Vec3,
-    pub(crate) pass: u32,
-}
-
-impl SoftAnchor {
-    pub(crate) const NONE: SoftAnchor = SoftAnchor {
-        partner: u32::MAX,
-        corners: [0; 3],
-        weights: Vec3::ZERO,
-        pass: 0,
-    };
 }
 
 impl<'a> Arrays<'a> {
@@ -297,7 +187,14 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
                 continue;
             };
             if ra.intersects(&rb) {
-                contacts += resolve_pair(&mut left[a], &mut right[0], phase, &ra, &rb, [a as u32, b as u32]);
+                contacts += resolve_pair(
+                    &mut left[a],
+                    &mut right[0],
+                    phase,
+                    &ra,
+                    &rb,
+                    [a as u32, b as u32],
+                );
             }
         }
     }
@@ -381,8 +278,17 @@ fn resolve_pair(
         partner: slots[0],
         supports: std::mem::take(&mut b.scratch.soft_supports).into(),
     };
-    let contacts = contact_a.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta)
-        + contact_b.particles_against_triangles(&bb.particles, &pb, ba, &pa, None, &overlap, tb);
+    let contacts =
+        contact_a.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta)
+            + contact_b.particles_against_triangles(
+                &bb.particles,
+                &pb,
+                ba,
+                &pa,
+                None,
+                &overlap,
+                tb,
+            );
     a.scratch.soft_supports = contact_a.supports.into_inner();
     b.scratch.soft_supports = contact_b.supports.into_inner();
     a.record_soft_contacts();
@@ -640,8 +546,7 @@ impl Contact {
             let slip = relative_motion - n * relative_motion.dot(n);
             let slip_length = slip.length();
             let anchor = p.anchors.get(i);
-            let anchored = anchor.partner == self.partner
-                && anchor.pass + 1 >= p.pass;
+            let anchored = anchor.partner == self.partner && anchor.pass + 1 >= p.pass;
             let mut held_fully = false;
             if anchored {
                 // Static friction: back on the anchor if it is within reach.
@@ -653,7 +558,13 @@ impl Contact {
                 if tangential.length_squared() <= (self.friction * depth).powi(2) {
                     moved(-tangential / w);
                     held_fully = true;
-                    p.anchors.set(i, SoftAnchor { pass: p.pass, ..anchor });
+                    p.anchors.set(
+                        i,
+                        SoftAnchor {
+                            pass: p.pass,
+                            ..anchor
+                        },
+                    );
                 }
             }
             if !held_fully {
@@ -730,332 +641,5 @@ impl Contact {
             push(-slip * (jt / slip_speed));
         }
         Some(n)
-    }
-}
-
-/// A body stepped in lockstep with others, with its own copy of the rigid spheres (which it
-/// pushes as it would alone; the plugin merges every body's pushes after the stage).
-pub struct LockstepBody<'a> {
-    /// The body.
-    pub state: &'a mut SoftBodyState,
-    /// Its copy of the rigid spheres.
-    pub spheres: &'a mut [RigidSphereState],
-    /// The contacts its particles made in the stage (soft, static, spheres, rigid bodies).
-    pub contacts: u32,
-}
-
-impl<'a> LockstepBody<'a> {
-    /// `state` with its copy of the spheres, no contacts counted yet.
-    pub fn new(state: &'a mut SoftBodyState, spheres: &'a mut [RigidSphereState]) -> Self {
-        LockstepBody {
-            state,
-            spheres,
-            contacts: 0,
-        }
-    }
-}
-
-/// A soft-contact pass of `phase` among `bodies`, each body's contacts counted on it.
-fn counted_pass(bodies: &mut [LockstepBody], phase: SoftContactPhase) -> u32 {
-    let contacts = soft_contact_pass(bodies, phase);
-    for body in bodies.iter_mut() {
-        body.contacts += std::mem::take(&mut body.state.scratch.soft_count);
-    }
-    contacts
-}
-
-impl std::ops::Deref for LockstepBody<'_> {
-    type Target = SoftBodyState;
-    fn deref(&self) -> &SoftBodyState {
-        self.state
-    }
-}
-
-impl DerefMut for LockstepBody<'_> {
-    fn deref_mut(&mut self) -> &mut SoftBodyState {
-        self.state
-    }
-}
-
-/// Runs `job` on every body of `bodies`, one body per job of `parallel`.
-fn for_each_lockstep(
-    bodies: &mut [LockstepBody],
-    parallel: &dyn Parallel,
-    job: &(dyn Fn(&mut LockstepBody) + Sync),
-) {
-    let count = bodies.len();
-    // SAFETY: each job reaches its own body alone.
-    let shared = unsafe { SharedSlice::new(bodies) };
-    parallel.run(count, &|i| job(unsafe { shared.get_mut(i) }));
-}
-
-/// [`Stage::Contacts`] for bodies that may touch each other (the plugin's groups of bodies whose
-/// bounds overlap): a soft-contact pass on the predicted positions `x + h v` (for the paper's
-/// springs, which are not substepped, the only one before their volume passes), each body's
-/// contacts outside substeps, then the substepped bodies' substeps in lockstep, as many as the
-/// most any of them needs. In each substep every body's shape solve runs, then one two-way
-/// soft-contact pass on the predicted positions, then each body's own contacts and volume
-/// impulses, then what those impulses pushed into other bodies is handed to them. The bodies
-/// run one per job of `parallel` (their blocks on one thread each) wherever they do not touch
-/// each other's data, and the contact passes in order, so the result does not depend on it.
-/// Returns the contacts.
-pub fn contact_stage_together(
-    bodies: &mut [LockstepBody],
-    h: f32,
-    colliders: &[ColliderInstance],
-    parallel: &dyn Parallel,
-) -> u32 {
-    let counted = |bodies: &[LockstepBody]| bodies.iter().map(|b| b.contacts).sum::<u32>();
-    let before = counted(bodies);
-    counted_pass(bodies, SoftContactPhase::Predicted(h));
-    for body in bodies.iter_mut() {
-        let b = &mut *body;
-        b.contacts += b
-            .state
-            .resolve_contacts_outside_substeps(h, b.spheres, colliders, &Serial);
-    }
-    let substeps = bodies
-        .iter()
-        .filter_map(|b| b.state.substeps_needed(h, b.spheres, colliders))
-        .max();
-    let Some(substeps) = substeps else {
-        return counted(bodies) - before;
-    };
-    for body in bodies.iter_mut() {
-        let plan = body
-            .state
-            .plan_substeps(h, body.spheres, colliders, Some(substeps));
-        body.state.scratch.substep_plan = plan;
-    }
-    for k in 0..substeps {
-        for_each_lockstep(bodies, parallel, &|body| {
-            if let Some(plan) = body.state.scratch.substep_plan {
-                body.state.substep_motion(&plan, k);
-            }
-        });
-        counted_pass(bodies, SoftContactPhase::Substep);
-        for_each_lockstep(bodies, parallel, &|body| {
-            if let Some(plan) = body.state.scratch.substep_plan {
-                body.state.substep_velocities(&plan);
-                body.contacts += body.state.substep_contacts(&plan, k, body.spheres, colliders);
-                body.state.substep_finish(&plan, body.spheres, &Serial);
-            }
-        });
-        apply_soft_reactions(bodies);
-    }
-    for body in bodies.iter_mut() {
-        if body.state.scratch.substep_plan.take().is_some() {
-            body.state.update_sleep(h, body.spheres, colliders);
-        }
-    }
-    counted(bodies) - before
-}
-
-/// The soft-contact pass that ends a step of bodies stepped together (after
-/// [`Stage::Integrate`]): on the positions the step ended at, moving penetrating particles
-/// apart and stopping their approach, so that no particle ends a step inside another body.
-/// Returns the contacts.
-pub fn final_contacts_together(bodies: &mut [LockstepBody]) -> u32 {
-    counted_pass(bodies, SoftContactPhase::Final)
-}
-
-/// A whole step of several bodies that meet each other, in the plugin's order: the contact
-/// stage together ([`contact_stage_together`]), each body's other stages ([`Stage::ORDER`]),
-/// and the final pass ([`final_contacts_together`]). For using the core without Bevy, and
-/// for tests and benchmarks of piles.
-pub fn step_bodies(
-    bodies: &mut [SoftBodyState],
-    h: f32,
-    gravity: Vec3,
-    colliders: &[ColliderInstance],
-    parallel: &dyn Parallel,
-) -> u32 {
-    let mut bodies: Vec<LockstepBody> = bodies
-        .iter_mut()
-        .map(|state| LockstepBody::new(state, &mut []))
-        .collect();
-    let mut contacts = 0;
-    for body in bodies.iter_mut() {
-        body.state.begin_step();
-    }
-    for stage in Stage::ORDER {
-        if stage == Stage::Contacts {
-            contacts += contact_stage_together(&mut bodies, h, colliders, parallel);
-            continue;
-        }
-        for body in bodies.iter_mut() {
-            contacts += body
-                .state
-                .run_stage(stage, h, gravity, &mut [], colliders, &Serial);
-        }
-        if stage == Stage::Integrate {
-            contacts += final_contacts_together(&mut bodies);
-        }
-    }
-    contacts
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::core::geometry::signed_volume;
-    use crate::core::material::SoftBodyMaterial;
-    use crate::core::parallel::Serial;
-    use glam::UVec3;
-    use parry3d::math::Pose;
-    use parry3d::shape::SharedShape;
-
-    /// A jelly cube of `side` metres, 6 cells a side, its lowest corner at `corner`.
-    fn jelly(side: f32, corner: Vec3) -> SoftBodyState {
-        let mesh = crate::core::box_grid(UVec3::splat(6), Vec3::splat(side / 6.0), corner).unwrap();
-        SoftBodyState::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap()
-    }
-
-    /// How deep `x` is inside `body` (zero outside): its distance to the body's boundary when
-    /// it lies in one of its tets.
-    pub(super) fn depth_inside(x: Vec3, body: &SoftBodyState) -> f32 {
-        let p = body.positions();
-        let inside = body.mesh().tets().iter().any(|t| {
-            let [a, b, c, d] = t.map(|i| p[i as usize]);
-            let whole = signed_volume(&[a, b, c, d]);
-            let parts = [
-                signed_volume(&[x, b, c, d]),
-                signed_volume(&[a, x, c, d]),
-                signed_volume(&[a, b, x, d]),
-                signed_volume(&[a, b, c, x]),
-            ];
-            parts.iter().all(|&v| v * whole.signum() >= 0.0)
-        });
-        if !inside {
-            return 0.0;
-        }
-        body.boundary()
-            .triangles()
-            .iter()
-            .map(|t| {
-                let [a, b, c] = t.map(|i| p[i as usize]);
-                let q = closest_barycentric(x, a, b, c);
-                (a * q.x + b * q.y + c * q.z).distance(x)
-            })
-            .fold(f32::INFINITY, f32::min)
-    }
-
-    /// The deepest any particle of one body is inside another.
-    pub(super) fn deepest(bodies: &[SoftBodyState]) -> f32 {
-        let mut deepest = 0.0f32;
-        for (a, body) in bodies.iter().enumerate() {
-            for (b, other) in bodies.iter().enumerate() {
-                if a != b {
-                    for &x in body.positions() {
-                        deepest = deepest.max(depth_inside(x, other));
-                    }
-                }
-            }
-        }
-        deepest
-    }
-
-    fn momentum(bodies: &[SoftBodyState]) -> Vec3 {
-        bodies
-            .iter()
-            .flat_map(|b| b.velocities().iter().zip(b.masses()))
-            .map(|(&v, &m)| m * v)
-            .sum()
-    }
-
-    /// Two jellies thrown at each other in space (4 m/s each, off-centre) bounce apart: they
-    /// end moving away from each other, no particle of one ends a step more than a millimetre
-    /// inside the other, and their linear momentum is what it was.
-    #[test]
-    fn two_jellies_thrown_at_each_other_bounce_apart() {
-        let mut bodies = [
-            jelly(0.3, Vec3::new(-0.5, 0.0, 0.0)),
-            jelly(0.3, Vec3::new(0.25, 0.08, 0.05)),
-        ];
-        bodies[0].velocities_mut().fill(Vec3::X * 4.0);
-        bodies[1].velocities_mut().fill(-Vec3::X * 4.0);
-        let before = momentum(&bodies);
-        let mut worst = 0.0f32;
-        let mut contacts = 0;
-        for _ in 0..30 {
-            contacts += step_bodies(&mut bodies, 1.0 / 60.0, Vec3::ZERO, &[], &Serial);
-            worst = worst.max(deepest(&bodies));
-        }
-        assert!(contacts > 50, "{contacts} contacts");
-        let after = momentum(&bodies);
-        // Momentum is conserved by every contact up to rounding: the substeps derive velocities
-        // from positions in `f32` (a rounding of 3e-8 m at half a metre is 7e-6 m/s at 240 Hz),
-        // and contacts move particles by micrometres, so the sum drifts by a few parts in 1e4.
-        let carried = 2.0 * 4.0 * bodies[0].masses().iter().sum::<f32>();
-        assert!(
-            (after - before).length() < 5e-4 * carried,
-            "momentum {before} -> {after}"
-        );
-        let apart = bodies[1].centre_of_mass().x - bodies[0].centre_of_mass().x;
-        let closing = (bodies[1].velocities().iter().sum::<Vec3>()
-            - bodies[0].velocities().iter().sum::<Vec3>())
-        .x;
-        assert!(
-            apart > 0.3 && closing > 0.0,
-            "apart {apart} m, closing {closing}"
-        );
-        assert!(
-            worst < 1e-3,
-            "a particle ended a step {worst} m inside the other body"
-        );
-    }
-
-    /// A jelly slab: 0.3 m square, 0.1 m thick (6 x 2 x 6 cells), its lowest corner at `corner`.
-    fn slab(corner: Vec3) -> SoftBodyState {
-        let mesh = crate::core::box_grid(UVec3::new(6, 2, 6), Vec3::splat(0.05), corner).unwrap();
-        SoftBodyState::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap()
-    }
-
-    /// Three jelly slabs dropped in a stack on the ground (a centimetre off each other's
-    /// centres) stay stacked and come to rest: over the last two of six seconds no centre of
-    /// mass moves more than 5 mm, every body keeps its volume within 1 %, and no particle ends
-    /// inside another body by more than 2 mm. Slabs, not cubes: a column of this jelly taller
-    /// than about 0.5 m buckles under its own weight (Greenhill), so a stack of three 0.3 m
-    /// cubes falls over in reality too.
-    #[test]
-    fn a_stack_of_three_jellies_stays_stacked() {
-        let ground = [ColliderInstance::new(
-            SharedShape::halfspace(Vec3::Y),
-            Pose::IDENTITY,
-            0.8,
-        )];
-        let mut bodies = [
-            slab(Vec3::ZERO),
-            slab(Vec3::new(0.01, 0.11, -0.01)),
-            slab(Vec3::new(0.0, 0.22, 0.01)),
-        ];
-        let g = Vec3::new(0.0, -9.81, 0.0);
-        let (h, steps) = (1.0 / 60.0, 360);
-        let mut worst = 0.0f32;
-        let mut settled = [Vec3::ZERO; 3];
-        for step in 0..steps {
-            step_bodies(&mut bodies, h, g, &ground, &Serial);
-            if step % 10 == 9 {
-                worst = worst.max(deepest(&bodies));
-            }
-            if step == steps - 120 {
-                settled = bodies.each_ref().map(|b| b.centre_of_mass());
-            }
-        }
-        assert!(
-            worst < 2e-3,
-            "a particle ended a step {worst} m inside another body"
-        );
-        for (k, body) in bodies.iter().enumerate() {
-            let centre = body.centre_of_mass();
-            assert!(
-                (centre.y - (0.05 + 0.1 * k as f32)).abs() < 0.03,
-                "jelly {k} at {centre}"
-            );
-            let drift = centre.distance(settled[k]);
-            assert!(drift < 5e-3, "jelly {k} moved {drift} m in the last 2 s");
-            let error = body.volume_metrics().volume_error_pct;
-            assert!(error.abs() < 1.0, "jelly {k}: volume error {error} %");
-        }
     }
 }

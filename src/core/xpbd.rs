@@ -35,23 +35,7 @@ use super::geometry::{signed_volume, volume_gradients};
 use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};
 use super::parallel::Parallel;
-
-/// How a body's substeps run in one step (see [`SoftBodyState::plan_substeps`]).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct SubstepPlan {
-    /// How many.
-    pub(crate) substeps: u32,
-    /// Their length.
-    pub(crate) hs: f32,
-    /// XPBD: the tets' volumes are projected in the shape solve, no volume impulses.
-    volumes: bool,
-    /// The shape projection's damping term (physical materials).
-    shape_damping: f32,
-    /// Whether the paper's spring dampers act on the velocities.
-    dampers: bool,
-    /// The tets' shape compliances, for a physical material under the impulses.
-    tet_compliance: Option<[f32; 2]>,
-}
+use super::soft_records::SubstepPlan;
 
 impl SoftBodyState {
     /// The step in substeps (see [`SoftBodyMaterial::is_substepped`]); nothing for a body

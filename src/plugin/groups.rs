@@ -39,7 +39,12 @@ fn root(parent: &mut [usize], mut i: usize) -> usize {
 
 /// Joins the bodies that may touch within a step of `h` into groups (a body meeting itself
 /// makes a group of one), marks them `stepped_together`, and records the groups.
-pub(super) fn find_groups(bodies: &mut Bodies, h: f32, gravity: Vec3, groups: &mut SoftContactGroups) {
+pub(super) fn find_groups(
+    bodies: &mut Bodies,
+    h: f32,
+    gravity: Vec3,
+    groups: &mut SoftContactGroups,
+) {
     let groups = &mut *groups;
     groups.candidates.clear();
     groups.members.clear();
@@ -82,9 +87,7 @@ pub(super) fn find_groups(bodies: &mut Bodies, h: f32, gravity: Vec3, groups: &m
     }
     for (a, joined) in joined.iter_mut().enumerate() {
         let entity = groups.candidates[a].0;
-        if !*joined
-            && let Ok((_, body, _)) = bodies.get(entity)
-        {
+        if !*joined && let Ok((_, body, _)) = bodies.get(entity) {
             *joined = body
                 .state
                 .soft_contact_settings()

@@ -25,8 +25,8 @@ mod systems;
 mod threads;
 mod timing;
 
-pub use systems::SolverSpheres;
 use groups::*;
+pub use systems::SolverSpheres;
 use systems::*;
 pub(crate) use systems::{gather_spheres, report};
 #[cfg(test)]
