@@ -41,6 +41,7 @@ use bevy_soft_body::core::{ImpulseSettings, VolumeMethod, XpbdSettings, box_grid
 use bevy_soft_body::game_scenes::{GameScene, GameShape};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, PaperScenesPlugin};
+use parry3d::shape::SharedShape;
 
 struct Args {
     /// The thread counts to run side by side (`--threads 1,2`), each at most the pool's.
@@ -385,6 +386,64 @@ fn main() {
                         .expect("a standard scene");
                 }
                 world.spawn((StaticCollider::ground(0.8), Transform::default()));
+            },
+        );
+    }
+    // 16 jelly cubes of 0.3 m and 2 560 tets piled in a box (a 0.9 m square, walls 0.6 m
+    // high), dropped in two layers, over their first 3 s: meeting each other
+    // (`jellies_16_pile`), and passing through each other (`jellies_16_pile_apart`, their soft
+    // contacts off), which is what the contacts cost.
+    for (name, contacts) in [("jellies_16_pile", true), ("jellies_16_pile_apart", false)] {
+        if !wanted(name) {
+            continue;
+        }
+        let jelly = GameScene {
+            lift: 0.0,
+            shape: GameShape::Cube {
+                size: 0.3,
+                cells: 8,
+            },
+            ..GameScene::standard()
+                .into_iter()
+                .find(|s| s.name == "jelly_cube_drop")
+                .expect("a standard scene")
+        };
+        bench(
+            &args,
+            name,
+            &game_methods,
+            (180, 1, 60.0),
+            |world, method| {
+                for k in 0..16 {
+                    let (i, j, layer) = (k % 3, (k / 3) % 3, k / 9);
+                    // A few centimetres off a grid, so that the pile is not a stack of towers.
+                    let nudge = 0.02 * ((k * 7) % 5) as f32 - 0.04;
+                    let offset = Vec3::new(
+                        -0.45 + 0.3 * i as f32 + 0.5 * nudge,
+                        0.02 + 0.4 * layer as f32 + 0.03 * (k % 3) as f32,
+                        -0.45 + 0.3 * j as f32 - 0.5 * nudge,
+                    );
+                    let body = jelly
+                        .spawn_body(&mut world.commands(), method, offset)
+                        .expect("a standard scene");
+                    world.flush();
+                    if !contacts && let Some(mut body) = world.get_mut::<SoftBody>(body) {
+                        body.state_mut().set_soft_contact_settings(None);
+                    }
+                }
+                world.spawn((StaticCollider::ground(0.8), Transform::default()));
+                // The walls, 5 cm thick, around the 0.9 m square.
+                for (centre, half) in [
+                    (Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.05, 0.3, 0.55)),
+                    (Vec3::new(0.5, 0.3, 0.0), Vec3::new(0.05, 0.3, 0.55)),
+                    (Vec3::new(0.0, 0.3, -0.5), Vec3::new(0.55, 0.3, 0.05)),
+                    (Vec3::new(0.0, 0.3, 0.5), Vec3::new(0.55, 0.3, 0.05)),
+                ] {
+                    world.spawn((
+                        StaticCollider::new(SharedShape::cuboid(half.x, half.y, half.z), 0.8),
+                        Transform::from_translation(centre),
+                    ));
+                }
             },
         );
     }

@@ -8,12 +8,14 @@ use std::time::Duration;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::core::{TetMesh, box_grid};
+use bevy_soft_body::game_scenes::{GameScene, GameShape, MeshStyle};
 use bevy_soft_body::prelude::*;
 use glam::UVec3;
 
 fn app(gravity: Vec3, step: Duration) -> App {
     let mut app = App::new();
     app.add_plugins((MinimalPlugins, SoftBodyPlugin::default()))
+        .insert_resource(Time::<Fixed>::from_duration(step))
         .insert_resource(TimeUpdateStrategy::ManualDuration(step))
         .insert_resource(SoftBodyGravity(gravity));
     app.update();
@@ -81,49 +83,83 @@ fn particles_inside(app: &mut App, depth: f32) -> usize {
     count
 }
 
-/// Three jelly slabs (0.3 x 0.1 x 0.3 m) dropped a centimetre apart in a stack on the ground at
-/// 60 Hz come to rest: over the last two of six seconds no centre of mass moves more than
-/// 5 mm, each keeps its volume within 1 %, and no particle of one lies more than 2 mm inside
-/// another.
+/// A jelly slab, 0.3 x 0.1 x 0.3 m in cells of 5 cm, on the crate's grid or on a jittered mesh
+/// (as other tools make), its lowest corner at `corner`.
+fn slab(style: MeshStyle, corner: Vec3) -> SoftBody {
+    let scene = GameScene {
+        shape: GameShape::Block {
+            size: Vec3::new(0.3, 0.1, 0.3),
+            cell: 0.05,
+        },
+        mesh: style,
+        ..GameScene::standard()
+            .into_iter()
+            .find(|s| s.name == "jelly_cube_drop")
+            .unwrap()
+    };
+    let mesh = scene.tet_mesh().unwrap();
+    let mut body = SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
+    body.state_mut().translate(corner);
+    body
+}
+
+/// Three jelly slabs dropped a centimetre apart in a stack on the ground come to rest, at 30,
+/// 60 and 120 Hz, on the crate's grid and on a jittered mesh: over the last two of six seconds
+/// no centre of mass moves more than 3 mm, each body keeps its volume within 1 %, and no
+/// particle of one lies more than 2 mm inside another. Slabs, not cubes: a column of this jelly
+/// taller than about 0.5 m buckles under its own weight (Greenhill), so a stack of three 0.3 m
+/// cubes would fall over in reality too.
 #[test]
 fn a_stack_of_three_jellies_comes_to_rest() {
-    let mut app = app(
-        Vec3::new(0.0, -9.81, 0.0),
-        Duration::from_secs_f64(1.0 / 60.0),
-    );
-    app.world_mut()
-        .spawn((StaticCollider::ground(0.8), Transform::default()));
-    let cells = UVec3::new(6, 2, 6);
-    let order: Vec<Entity> = [
-        Vec3::new(0.0, 0.0, 0.0),
-        Vec3::new(0.01, 0.11, -0.01),
-        Vec3::new(0.0, 0.22, 0.01),
-    ]
-    .into_iter()
-    .map(|corner| {
-        app.world_mut()
-            .spawn((jelly(cells, corner), Transform::default()))
-            .id()
-    })
-    .collect();
-    for _ in 0..240 {
-        app.update();
+    for hz in [30.0, 60.0, 120.0] {
+        for style in [MeshStyle::Grid, MeshStyle::Jittered(0.3)] {
+            let mut app = app(
+                Vec3::new(0.0, -9.81, 0.0),
+                Duration::from_secs_f64(1.0 / hz),
+            );
+            app.world_mut()
+                .spawn((StaticCollider::ground(0.8), Transform::default()));
+            let order: Vec<Entity> = [
+                Vec3::new(0.0, 0.0, 0.0),
+                Vec3::new(0.01, 0.11, -0.01),
+                Vec3::new(0.0, 0.22, 0.01),
+            ]
+            .into_iter()
+            .map(|corner| {
+                app.world_mut()
+                    .spawn((slab(style, corner), Transform::default()))
+                    .id()
+            })
+            .collect();
+            let steps = |seconds: f64| (seconds * hz).round() as usize;
+            for _ in 0..steps(4.0) {
+                app.update();
+            }
+            let settled = bodies(&mut app, &order);
+            for _ in 0..steps(2.0) {
+                app.update();
+            }
+            let end = bodies(&mut app, &order);
+            let case = format!("{hz} Hz, {style:?}");
+            for (k, ((before, _), (after, error))) in settled.iter().zip(&end).enumerate() {
+                assert!(
+                    (after.y - (0.05 + 0.1 * k as f32)).abs() < 0.03,
+                    "{case}: jelly {k} at {after}"
+                );
+                let drift = after.distance(*before);
+                println!("{case}: jelly {k} drifted {drift:.4} m, volume error {error:.2} %");
+                assert!(
+                    drift < 3e-3,
+                    "{case}: jelly {k} moved {drift} m in the last 2 s"
+                );
+                assert!(
+                    error.abs() < 1.0,
+                    "{case}: jelly {k}: volume error {error} %"
+                );
+            }
+            assert_eq!(particles_inside(&mut app, 2e-3), 0, "{case}");
+        }
     }
-    let settled = bodies(&mut app, &order);
-    for _ in 0..120 {
-        app.update();
-    }
-    let end = bodies(&mut app, &order);
-    for (k, ((before, _), (after, error))) in settled.iter().zip(&end).enumerate() {
-        assert!(
-            (after.y - (0.05 + 0.1 * k as f32)).abs() < 0.03,
-            "jelly {k} at {after}"
-        );
-        let drift = after.distance(*before);
-        assert!(drift < 5e-3, "jelly {k} moved {drift} m in the last 2 s");
-        assert!(error.abs() < 1.0, "jelly {k}: volume error {error} %");
-    }
-    assert_eq!(particles_inside(&mut app, 2e-3), 0);
 }
 
 /// Two jellies thrown at each other at 4 m/s each (off-centre, no gravity) bounce apart: they

@@ -594,7 +594,6 @@ impl Contact {
                 partner: self.partner,
                 corners: corners.map(|j| j as u32),
                 weights: q,
-                travel: (0..3).map(|k| q[k] * travel(t, corners[k])).sum(),
                 inv_mass: w_t,
                 friction: self.friction,
                 pushed: Vec3::ZERO,

@@ -37,8 +37,6 @@ pub struct SoftSupport {
     pub(crate) corners: [u32; 3],
     /// The barycentric weights of the particle's nearest point on the triangle.
     pub(crate) weights: Vec3,
-    /// How far the triangle's point moved since the substep's start.
-    pub(crate) travel: Vec3,
     /// The triangle point's inverse mass, `sum b_j^2 w_j`.
     pub(crate) inv_mass: f32,
     /// The pair's friction coefficient.
@@ -49,13 +47,22 @@ pub struct SoftSupport {
 }
 
 /// An impulse one body's volume impulses hand to another's triangle (split over its corners by
-/// `weights`), applied once every body has finished the substep.
+/// `weights`), applied with its friction once every body has finished the substep.
 #[derive(Clone, Copy, Debug)]
 pub struct SoftReaction {
+    /// The particle that pushed, of the body that made the reaction.
+    pub(crate) particle: u32,
+    /// The triangle's outward normal.
+    pub(crate) normal: Vec3,
     pub(crate) partner: u32,
     pub(crate) corners: [u32; 3],
     pub(crate) weights: Vec3,
+    /// The impulse on the triangle.
     pub(crate) impulse: Vec3,
+    /// The triangle point's inverse mass, `sum b_j^2 w_j`.
+    pub(crate) inv_mass: f32,
+    /// The pair's friction coefficient.
+    pub(crate) friction: f32,
 }
 
 /// Where a particle's static friction holds it on another body's surface: a point of one of

@@ -342,7 +342,7 @@ impl SoftBodyState {
             self.positions[i] += hs * (full + friction);
             self.velocities[i] = v + friction;
         }
-        self.hand_soft_pushes(hs, k);
+        self.hand_soft_pushes(k);
     }
 
     /// One Gauss-Seidel pass over the edge constraints, each of compliance
