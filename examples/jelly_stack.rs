@@ -35,7 +35,7 @@ fn spawn_jelly(
     commands: &mut Commands,
     meshes: &mut Assets<Mesh>,
     materials: &mut Assets<StandardMaterial>,
-    cells: UVec3,
+    (name, cells): (&'static str, UVec3),
     corner: Vec3,
     colour: Color,
 ) -> Entity {
@@ -45,7 +45,12 @@ fn spawn_jelly(
     let surface = mesh.boundary_surface();
     let body = SoftBody::new(mesh, SoftBodyMaterial::JELLY).expect("the jelly preset is valid");
     let entity = commands
-        .spawn((body, Transform::from_translation(corner), SceneMember))
+        .spawn((
+            body,
+            Transform::from_translation(corner),
+            Name::new(name),
+            SceneMember,
+        ))
         .id();
     commands.entity(entity).insert((
         SoftBodySurface::new(entity),
@@ -71,18 +76,18 @@ fn spawn_scene(
         SceneMember,
     ));
     let slab = UVec3::new(6, 2, 6);
-    let colours = [
-        Color::srgb(0.85, 0.2, 0.3),
-        Color::srgb(0.95, 0.6, 0.15),
-        Color::srgb(0.3, 0.7, 0.35),
+    let slabs = [
+        ("red slab", Color::srgb(0.85, 0.2, 0.3)),
+        ("orange slab", Color::srgb(0.95, 0.6, 0.15)),
+        ("green slab", Color::srgb(0.3, 0.7, 0.35)),
     ];
-    for (k, colour) in colours.into_iter().enumerate() {
+    for (k, (name, colour)) in slabs.into_iter().enumerate() {
         let corner = Vec3::new(-0.15 + 0.01 * (k % 2) as f32, 0.11 * k as f32, -0.15);
         spawn_jelly(
             &mut commands,
             &mut meshes,
             &mut materials,
-            slab,
+            (name, slab),
             corner,
             colour,
         );
@@ -92,7 +97,7 @@ fn spawn_scene(
         &mut commands,
         &mut meshes,
         &mut materials,
-        UVec3::splat(3),
+        ("blue cube", UVec3::splat(3)),
         Vec3::new(-0.075, 0.34, -0.075),
         Color::srgb(0.3, 0.45, 0.9),
     );
@@ -100,11 +105,9 @@ fn spawn_scene(
 
 fn frame_scene(mut camera: Query<(&mut OrbitCamera, &mut Transform)>) {
     if let Ok((mut orbit, mut transform)) = camera.single_mut() {
-        common::frame_camera(
-            &mut orbit,
-            Vec3::new(-0.4, 0.0, -0.4),
-            Vec3::new(0.4, 0.5, 0.4),
-        );
+        // A little right of the stack: the panel covers the window's right side.
+        orbit.focus = Vec3::new(0.2, 0.2, 0.0);
+        orbit.distance = 1.6;
         orbit.pitch = 0.35;
         *transform = orbit.transform();
     }
@@ -132,7 +135,7 @@ fn throw_jelly(
         &mut commands,
         &mut meshes,
         &mut materials,
-        cells,
+        ("thrown jelly", cells),
         start - half,
         Color::srgb(0.7, 0.3, 0.85),
     );
