@@ -389,7 +389,7 @@ fn main() {
             },
         );
     }
-    // 16 jelly cubes of 0.3 m and 2 560 tets piled in a box (a 0.9 m square, walls 0.6 m
+    // 16 jelly cubes of 0.3 m and 2 560 tets piled in a box (a 1 m square, walls 0.6 m
     // high), dropped in two layers, over their first 3 s: meeting each other
     // (`jellies_16_pile`), and passing through each other (`jellies_16_pile_apart`, their soft
     // contacts off), which is what the contacts cost.
@@ -432,12 +432,12 @@ fn main() {
                     }
                 }
                 world.spawn((StaticCollider::ground(0.8), Transform::default()));
-                // The walls, 5 cm thick, around the 0.9 m square.
+                // The walls, 10 cm thick, around the 1 m square.
                 for (centre, half) in [
-                    (Vec3::new(-0.5, 0.3, 0.0), Vec3::new(0.05, 0.3, 0.55)),
-                    (Vec3::new(0.5, 0.3, 0.0), Vec3::new(0.05, 0.3, 0.55)),
-                    (Vec3::new(0.0, 0.3, -0.5), Vec3::new(0.55, 0.3, 0.05)),
-                    (Vec3::new(0.0, 0.3, 0.5), Vec3::new(0.55, 0.3, 0.05)),
+                    (Vec3::new(-0.55, 0.3, 0.0), Vec3::new(0.05, 0.3, 0.6)),
+                    (Vec3::new(0.55, 0.3, 0.0), Vec3::new(0.05, 0.3, 0.6)),
+                    (Vec3::new(0.0, 0.3, -0.55), Vec3::new(0.6, 0.3, 0.05)),
+                    (Vec3::new(0.0, 0.3, 0.55), Vec3::new(0.6, 0.3, 0.05)),
                 ] {
                     world.spawn((
                         StaticCollider::new(SharedShape::cuboid(half.x, half.y, half.z), 0.8),
