@@ -1,7 +1,8 @@
 //! Results do not depend on the number of threads: the same scene, stepped with 1, 2 and 4
 //! threads in Bevy's task pools (and on four held to one and to two by
-//! `SoftBodyThreads::max_threads`), ends bit for bit the same, both for several bodies sharing a
-//! sphere (bodies in parallel) and for one large body (its blocks in parallel). The pools are
+//! `SoftBodyThreads::max_threads`), ends bit for bit the same, for several bodies sharing a
+//! sphere (bodies in parallel), for one large body (its blocks in parallel) and for a pile of
+//! jellies stepped together (their substeps in lockstep, bodies in parallel). The pools are
 //! global to a process, so each thread count runs in a child process (this test binary again,
 //! told by an environment variable what to do).
 
@@ -15,11 +16,22 @@ use bevy_soft_body::prelude::*;
 
 const CHILD: &str = "BEVY_SOFT_BODY_THREADS_CHILD";
 
-/// Steps four bodies (two methods), a sphere landing across two of them and the ground, or
-/// (`one_body`) one body of 8640 tets with a sphere landing on it, and returns every particle's
-/// and the sphere's final position and the last step's contacts (in the order they came), as
-/// bits.
-fn simulate(threads: usize, max_threads: usize, one_body: bool) -> Vec<u32> {
+/// What a child process steps.
+#[derive(Clone, Copy, PartialEq)]
+enum Scene {
+    /// Four bodies (two methods), a sphere landing across two of them, the ground.
+    Bodies,
+    /// One body of 8640 tets with a sphere landing on it.
+    OneBody,
+    /// Three jelly slabs and a jelly cube dropped in a stack: bodies stepped together, meeting
+    /// each other.
+    Pile,
+}
+
+/// Steps `scene` and returns every particle's and the sphere's final position and the last
+/// step's contacts (in the order they came), as bits.
+fn simulate(threads: usize, max_threads: usize, scene: Scene) -> Vec<u32> {
+    let one_body = scene == Scene::OneBody;
     // `threads` threads in the compute pool, where the systems and the bodies run.
     let mut options = TaskPoolOptions::with_num_threads(threads + 2);
     options.compute.min_threads = threads;
@@ -53,7 +65,21 @@ fn simulate(threads: usize, max_threads: usize, one_body: bool) -> Vec<u32> {
     let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(4), Vec3::splat(0.1), Vec3::ZERO)
         .unwrap()
         .into();
-    for k in (0..4).filter(|_| !one_body) {
+    if scene == Scene::Pile {
+        for (k, cells) in [UVec3::new(6, 2, 6); 3]
+            .into_iter()
+            .chain([UVec3::splat(3)])
+            .enumerate()
+        {
+            let mesh = box_grid(cells, Vec3::splat(0.05), Vec3::ZERO).unwrap();
+            let x = if k == 3 { 0.08 } else { 0.01 * (k % 2) as f32 };
+            app.world_mut().spawn((
+                SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap(),
+                Transform::from_xyz(x, 0.11 * k as f32, x),
+            ));
+        }
+    }
+    for k in (0..4).filter(|_| scene == Scene::Bodies) {
         let method = if k % 2 == 0 {
             VolumeMethod::PAPER_IMPULSES
         } else {
@@ -69,7 +95,7 @@ fn simulate(threads: usize, max_threads: usize, one_body: bool) -> Vec<u32> {
         ));
     }
     // Lands on the first two bodies at once.
-    if !one_body {
+    if scene == Scene::Bodies {
         app.world_mut().spawn((
             RigidSphere::new(0.2, 30.0),
             Transform::from_xyz(0.42, 0.75, 0.2),
@@ -100,13 +126,13 @@ fn simulate(threads: usize, max_threads: usize, one_body: bool) -> Vec<u32> {
 
 /// Runs `test` in a child process per thread count (1, 2, 4, and 4 held to 1 and to 2) and
 /// checks that all agree.
-fn compare_thread_counts(test: &str, one_body: bool) {
+fn compare_thread_counts(test: &str, scene: Scene) {
     if let Ok(threads) = std::env::var(CHILD) {
         let (threads, max_threads) = match threads.split_once(" max ") {
             Some((threads, max)) => (threads, max.parse().unwrap()),
             None => (threads.as_str(), usize::MAX),
         };
-        let bits = simulate(threads.parse().unwrap(), max_threads, one_body);
+        let bits = simulate(threads.parse().unwrap(), max_threads, scene);
         let hash = bits.iter().fold(0xcbf29ce484222325u64, |h, &b| {
             (h ^ b as u64).wrapping_mul(0x100000001b3)
         });
@@ -138,13 +164,21 @@ fn compare_thread_counts(test: &str, one_body: bool) {
 
 #[test]
 fn results_do_not_depend_on_the_thread_count() {
-    compare_thread_counts("results_do_not_depend_on_the_thread_count", false);
+    compare_thread_counts("results_do_not_depend_on_the_thread_count", Scene::Bodies);
+}
+
+#[test]
+fn a_pile_stepped_together_does_not_depend_on_the_thread_count() {
+    compare_thread_counts(
+        "a_pile_stepped_together_does_not_depend_on_the_thread_count",
+        Scene::Pile,
+    );
 }
 
 #[test]
 fn one_body_in_blocks_does_not_depend_on_the_thread_count() {
     compare_thread_counts(
         "one_body_in_blocks_does_not_depend_on_the_thread_count",
-        true,
+        Scene::OneBody,
     );
 }
