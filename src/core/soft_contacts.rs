@@ -436,6 +436,7 @@ impl Contact {
     /// `boundary` (of `t`) near it. For a self contact (`p` and `t` the same), `rest` holds the
     /// rest positions, and the triangles within two longest boundary edges of the particle at
     /// rest are skipped (its neighbours on the same surface).
+    #[allow(clippy::too_many_arguments)] // the two sides' arrays, and where to look
     fn particles_against_triangles(
         &self,
         particles: &[u32],
@@ -509,9 +510,7 @@ impl Contact {
         let now = corners.map(|j| t.x.get(j));
         let end = corners.map(|j| t.x.get(j) + ahead * t.v.get(j));
         let was_outside = outside_of(x, now, thickness);
-        let Some((d, n, q)) = surface_distance(xp, end) else {
-            return None;
-        };
+        let (d, n, q) = surface_distance(xp, end)?;
         if d >= thickness || (d < -reach && !was_outside) {
             return None;
         }

@@ -100,8 +100,8 @@ pub(super) fn find_groups(
             continue;
         }
         groups.starts.push(groups.members.len());
-        for b in a..n {
-            if joined[b] && root(&mut groups.parent, b) == a {
+        for (b, &member) in joined.iter().enumerate().skip(a) {
+            if member && root(&mut groups.parent, b) == a {
                 groups.members.push(groups.candidates[b].0);
             }
         }
