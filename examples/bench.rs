@@ -364,14 +364,7 @@ fn main() {
         if !wanted(name) {
             continue;
         }
-        let jelly = GameScene {
-            lift: 0.3,
-            shape: GameShape::Cube { size: 0.5, cells },
-            ..GameScene::standard()
-                .into_iter()
-                .find(|s| s.name == "jelly_cube_drop")
-                .expect("a standard scene")
-        };
+        let jelly = jelly_cube(0.5, cells, 0.3);
         bench(
             &args,
             name,
@@ -397,17 +390,7 @@ fn main() {
         if !wanted(name) {
             continue;
         }
-        let jelly = GameScene {
-            lift: 0.0,
-            shape: GameShape::Cube {
-                size: 0.3,
-                cells: 8,
-            },
-            ..GameScene::standard()
-                .into_iter()
-                .find(|s| s.name == "jelly_cube_drop")
-                .expect("a standard scene")
-        };
+        let jelly = jelly_cube(0.3, 8, 0.0);
         bench(
             &args,
             name,
@@ -446,5 +429,18 @@ fn main() {
                 }
             },
         );
+    }
+}
+
+/// The standard jelly cube drop's material with a cube of `size` metres in `cells` cells a side,
+/// lifted `lift` metres.
+fn jelly_cube(size: f32, cells: u32, lift: f32) -> GameScene {
+    GameScene {
+        lift,
+        shape: GameShape::Cube { size, cells },
+        ..GameScene::standard()
+            .into_iter()
+            .find(|s| s.name == "jelly_cube_drop")
+            .expect("a standard scene")
     }
 }

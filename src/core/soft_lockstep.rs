@@ -172,7 +172,7 @@ pub fn contact_stage_together(
         let b = &mut *body;
         b.contacts += b
             .state
-            .resolve_contacts_outside_substeps(h, b.spheres, colliders, &Serial);
+            .resolve_contacts_on(h, b.spheres, colliders, &Serial);
     }
     let substeps = bodies
         .iter()

@@ -108,9 +108,10 @@ impl SoftBodyState {
     }
 
     /// The particles against the spheres, the rigid bodies of another engine, then the static
-    /// colliders (last, so that no particle is left inside the ground by a body pushing it). A body solved in substeps
-    /// meets them in its substeps instead.
-    fn resolve_contacts_on(
+    /// colliders (last, so that no particle is left inside the ground by a body pushing it). A
+    /// body solved in substeps meets them in its substeps instead: this is what
+    /// [`Stage::Contacts`] does besides `shape_pass`.
+    pub(crate) fn resolve_contacts_on(
         &mut self,
         h: f32,
         spheres: &mut [RigidSphereState],
@@ -123,18 +124,6 @@ impl SoftBodyState {
         self.resolve_sphere_contacts(h, spheres)
             + self.resolve_rigid_contacts(h, 0.0)
             + self.resolve_static_contacts_on(h, colliders, parallel)
-    }
-
-    /// The contact stage's part for a body not solved in substeps (a substepped body meets
-    /// its contacts in its substeps): what [`Stage::Contacts`] does besides `shape_pass`.
-    pub fn resolve_contacts_outside_substeps(
-        &mut self,
-        h: f32,
-        spheres: &mut [RigidSphereState],
-        colliders: &[ColliderInstance],
-        parallel: &dyn Parallel,
-    ) -> u32 {
-        self.resolve_contacts_on(h, spheres, colliders, parallel)
     }
 
     /// A whole step without colliders or spheres: for tests and benchmarks of the core.
