@@ -43,22 +43,25 @@ fn bodies(app: &mut App, order: &[Entity]) -> Vec<(Vec3, f64)> {
         .collect()
 }
 
+/// Whether `x` lies inside the tet `t` of the particles `p`.
+fn in_tet(x: Vec3, p: &[Vec3], t: &[u32; 4]) -> bool {
+    let [a, b, c, d] = t.map(|i| p[i as usize]);
+    let volume = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| (b - a).dot((c - a).cross(d - a));
+    let whole = volume(a, b, c, d).signum();
+    [
+        volume(x, b, c, d),
+        volume(a, x, c, d),
+        volume(a, b, x, d),
+        volume(a, b, c, x),
+    ]
+    .iter()
+    .all(|&v| v * whole > 0.0)
+}
+
 /// Whether `x` lies inside one of `body`'s tets.
 fn inside(x: Vec3, body: &SoftBody) -> bool {
     let p = body.state().positions();
-    body.state().mesh().tets().iter().any(|t| {
-        let [a, b, c, d] = t.map(|i| p[i as usize]);
-        let volume = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| (b - a).dot((c - a).cross(d - a));
-        let whole = volume(a, b, c, d).signum();
-        [
-            volume(x, b, c, d),
-            volume(a, x, c, d),
-            volume(a, b, x, d),
-            volume(a, b, c, x),
-        ]
-        .iter()
-        .all(|&v| v * whole > 0.0)
-    })
+    body.state().mesh().tets().iter().any(|t| in_tet(x, p, t))
 }
 
 /// How many particles of one body lie deeper than `depth` inside another (tested by moving
@@ -233,26 +236,13 @@ fn a_body_without_soft_contacts_passes_through() {
 /// (deeper: inside when moved `depth` along each axis both ways).
 fn inside_part(body: &SoftBody, particles: &[usize], tets: &[[u32; 4]], depth: f32) -> usize {
     let p = body.state().positions();
-    let in_tet = |x: Vec3, t: &[u32; 4]| {
-        let [a, b, c, d] = t.map(|i| p[i as usize]);
-        let volume = |a: Vec3, b: Vec3, c: Vec3, d: Vec3| (b - a).dot((c - a).cross(d - a));
-        let whole = volume(a, b, c, d).signum();
-        [
-            volume(x, b, c, d),
-            volume(a, x, c, d),
-            volume(a, b, x, d),
-            volume(a, b, c, x),
-        ]
-        .iter()
-        .all(|&v| v * whole > 0.0)
-    };
     let offsets = [Vec3::X, -Vec3::X, Vec3::Y, -Vec3::Y, Vec3::Z, -Vec3::Z];
     particles
         .iter()
         .filter(|&&i| {
             offsets
                 .iter()
-                .all(|&o| tets.iter().any(|t| in_tet(p[i] + depth * o, t)))
+                .all(|&o| tets.iter().any(|t| in_tet(p[i] + depth * o, p, t)))
         })
         .count()
 }
