@@ -401,10 +401,11 @@ fn main() {
                     let (i, j, layer) = (k % 3, (k / 3) % 3, k / 9);
                     // A few centimetres off a grid, so that the pile is not a stack of towers.
                     let nudge = 0.02 * ((k * 7) % 5) as f32 - 0.04;
+                    // Centres 0.3 m apart about the box's centre: 3 cm or more from each wall.
                     let offset = Vec3::new(
-                        -0.45 + 0.3 * i as f32 + 0.5 * nudge,
+                        -0.3 + 0.3 * i as f32 + 0.5 * nudge,
                         0.02 + 0.4 * layer as f32 + 0.03 * (k % 3) as f32,
-                        -0.45 + 0.3 * j as f32 - 0.5 * nudge,
+                        -0.3 + 0.3 * j as f32 - 0.5 * nudge,
                     );
                     let body = jelly
                         .spawn_body(&mut world.commands(), method, offset)
