@@ -54,6 +54,14 @@ pub struct SoftBodyState {
     pub(crate) positions: Vec<Vec3>,
     /// Positions at the start of the last step, to interpolate between steps when rendering.
     pub(crate) previous_positions: Vec<Vec3>,
+    /// Whether `previous_positions` is where the last step started (not a placement's reset).
+    pub(crate) motion_tracked: bool,
+    /// Whether the body touched another soft body (or itself) since the step began.
+    pub(crate) met_soft_bodies: bool,
+    /// For a body that touched another soft body in the last step, how far its particles
+    /// moved in it relative to the body's mean motion (the largest distance): what the
+    /// substeps count as its deformation (see `xpbd.rs`, `substep_speed`). `None` otherwise.
+    pub(crate) last_relative_motion: Option<f32>,
     pub(crate) velocities: Vec<Vec3>,
     pub(crate) masses: Vec<f32>,
     /// Inverse masses as used in this step: zero for kinematic particles.
@@ -189,6 +197,9 @@ impl SoftBodyState {
         let mut body = SoftBodyState {
             positions: mesh.positions().to_vec(),
             previous_positions: mesh.positions().to_vec(),
+            motion_tracked: false,
+            met_soft_bodies: false,
+            last_relative_motion: None,
             velocities: vec![Vec3::ZERO; n],
             masses: vec![0.0; n],
             inv_masses: vec![0.0; n],
@@ -355,6 +366,7 @@ impl SoftBodyState {
         self.sleep.wake();
         self.positions.iter_mut().for_each(|p| *p += offset);
         self.previous_positions.copy_from_slice(&self.positions);
+        self.motion_tracked = false;
     }
 
     /// Maps every particle through `f` (for placing a body); the rest state is unchanged, so a
@@ -363,6 +375,7 @@ impl SoftBodyState {
         self.sleep.wake();
         self.positions.iter_mut().for_each(|p| *p = f(*p));
         self.previous_positions.copy_from_slice(&self.positions);
+        self.motion_tracked = false;
     }
 
     /// The material.
@@ -430,6 +443,9 @@ impl SoftBodyState {
     pub fn begin_step(&mut self) {
         self.counters = StepCounters::default();
         self.runaway = None;
+        let met = std::mem::take(&mut self.met_soft_bodies);
+        self.last_relative_motion = (self.motion_tracked && met).then(|| self.relative_motion());
+        self.motion_tracked = true;
         self.previous_positions.copy_from_slice(&self.positions);
         self.scratch.clamp_bounds.taken_this_step = false;
         for &i in &self.touching {
@@ -437,6 +453,32 @@ impl SoftBodyState {
             self.contact_sphere[i as usize] = u32::MAX;
         }
         self.touching.clear();
+    }
+
+    /// The largest distance a particle moved since `previous_positions`, relative to the
+    /// body's mean (mass-weighted) motion.
+    fn relative_motion(&self) -> f32 {
+        let (mut moved, mut mass) = (Vec3::ZERO, 0.0);
+        for ((&x, &x0), &m) in self
+            .positions
+            .iter()
+            .zip(&self.previous_positions)
+            .zip(&self.masses)
+        {
+            moved += m * (x - x0);
+            mass += m;
+        }
+        if mass <= 0.0 {
+            return 0.0;
+        }
+        let mean = moved / mass;
+        let farthest = self
+            .positions
+            .iter()
+            .zip(&self.previous_positions)
+            .map(|(&x, &x0)| (x - x0 - mean).length_squared())
+            .fold(0.0f32, f32::max);
+        farthest.sqrt()
     }
 
     /// Records that particle `i` touches a surface with outward unit `normal`, keeping the share
@@ -696,6 +738,7 @@ impl SoftBodyState {
             &mut self.positions,
         );
         self.previous_positions.copy_from_slice(&self.positions);
+        self.motion_tracked = false;
         self.velocities.fill(Vec3::ZERO);
         self.runaway = Some(Runaway {
             speed: motion.speed,

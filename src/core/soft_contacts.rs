@@ -101,6 +101,7 @@ impl SoftBodyState {
     /// next contact pass would turn into velocity pump energy into a pile.
     fn record_soft_contacts(&mut self) {
         self.scratch.soft_count += self.scratch.soft_touched.len() as u32;
+        self.met_soft_bodies |= !self.scratch.soft_touched.is_empty();
         for k in 0..self.scratch.soft_touched.len() {
             let (i, n) = self.scratch.soft_touched[k];
             self.record_contact(i as usize, n, 0.0, None);

@@ -174,9 +174,25 @@ pub fn contact_stage_together(
             .state
             .resolve_contacts_on(h, b.spheres, colliders, &Serial);
     }
+    // Bodies meeting each other meet at up to the spread of their mean velocities (the
+    // diagonal of the box around them): an impact between two bodies is met a fraction of a
+    // cell a substep, as a landing on a collider is.
+    let (mut low, mut high) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    for body in bodies.iter() {
+        let mass = body.state.total_mass();
+        if mass > 0.0 {
+            let mean = body.state.linear_momentum() / mass;
+            (low, high) = (low.min(mean), high.max(mean));
+        }
+    }
+    let approach = if low.x <= high.x {
+        (high - low).length()
+    } else {
+        0.0
+    };
     let substeps = bodies
         .iter()
-        .filter_map(|b| b.state.substeps_needed(h, b.spheres, colliders))
+        .filter_map(|b| b.state.substeps_needed(h, b.spheres, colliders, approach))
         .max();
     let Some(substeps) = substeps else {
         return counted(bodies) - before;

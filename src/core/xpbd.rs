@@ -94,7 +94,7 @@ impl SoftBodyState {
         }
         let substeps = match substeps {
             Some(n) => n.max(1),
-            None => self.substeps_needed(h, spheres, colliders)?,
+            None => self.substeps_needed(h, spheres, colliders, 0.0)?,
         };
         let volumes = self.material.method.is_xpbd();
         let hs = h / substeps as f32;
@@ -127,17 +127,19 @@ impl SoftBodyState {
         })
     }
 
-    /// The substeps this step needs on its own; `None` for a body not solved in substeps.
+    /// The substeps this step needs, for a body that other soft bodies approach at up to
+    /// `approach` (m/s; zero for a body alone); `None` for a body not solved in substeps.
     pub(crate) fn substeps_needed(
         &self,
         h: f32,
         spheres: &[RigidSphereState],
         colliders: &[ColliderInstance],
+        approach: f32,
     ) -> Option<u32> {
         match (self.material.method, self.material.elasticity) {
             (VolumeMethod::Xpbd(s), _) => Some(s.substeps.max(1)),
             (VolumeMethod::Impulses(_), Elasticity::Elastic(e)) => {
-                let speed = self.substep_speed(h, spheres, colliders);
+                let speed = self.substep_speed(h, spheres, colliders).max(approach);
                 Some(e.substeps(h, speed, self.shortest_edge))
             }
             _ => None,
@@ -146,9 +148,18 @@ impl SoftBodyState {
 
     /// The speed that sets a physical material's substeps (see
     /// [`ElasticSettings::max_motion`](super::material::ElasticSettings::max_motion)): the
-    /// fastest particle relative to the body's mean motion, and its speed in the world when a
-    /// particle would meet a collider or sphere within the step: a body falling or flying as a
-    /// whole needs no substeps for that, a landing does.
+    /// fastest particle relative to the body's mean motion, or its fastest in the world when a
+    /// particle would meet a collider or sphere within the step: a body falling or flying as
+    /// a whole needs no substeps for that, a landing does.
+    ///
+    /// For a body that touched other soft bodies in the last step, only the particles that
+    /// meet something count their speed in the world, and the relative speed is the
+    /// velocities' or, if less, how far a particle actually moved relative to the body in that
+    /// step over `h`: a particle held between bodies (in a pile) ends each substep with the
+    /// velocity of the push the other body handed it, which the next substep takes back;
+    /// counted as motion, it asked for the most substeps of a pile that barely moved, and the
+    /// smaller substeps' pushes then asked for fewer, step after step. An impact between
+    /// bodies is counted apart (`contact_stage_together`'s `approach`).
     fn substep_speed(
         &self,
         h: f32,
@@ -166,6 +177,7 @@ impl SoftBodyState {
             relative = relative.max((v - mean).length_squared());
             absolute = absolute.max(v.length_squared());
         }
+        let (relative, absolute) = (relative.sqrt(), absolute.sqrt());
         let meets = |x: Vec3, v: Vec3| {
             let end = x + h * v;
             colliders.iter().any(|c| c.penetration(end).is_some())
@@ -175,13 +187,19 @@ impl SoftBodyState {
                         < (s.radius + h * (v - s.velocity).length()).powi(2)
                 })
         };
-        let approaching = absolute > relative
-            && self
-                .positions
-                .iter()
-                .zip(&self.velocities)
-                .any(|(&x, &v)| meets(x, v));
-        if approaching { absolute } else { relative }.sqrt()
+        let particles = || self.positions.iter().zip(&self.velocities);
+        let Some(moved) = self.last_relative_motion else {
+            let approaching = absolute > relative && particles().any(|(&x, &v)| meets(x, v));
+            return if approaching { absolute } else { relative };
+        };
+        let mut approaching = 0.0f32;
+        for (&x, &v) in particles() {
+            let speed = v.length_squared();
+            if speed > approaching * approaching && meets(x, v) {
+                approaching = speed.sqrt();
+            }
+        }
+        relative.min(moved / h).max(approaching)
     }
 
     /// Substep `k`'s motion: gravity, the predicted positions, the shape solve (edges, or the
