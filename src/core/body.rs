@@ -85,6 +85,11 @@ pub struct SoftBodyState {
     pub(crate) material: SoftBodyMaterial,
     /// Per particle, the outward unit normal of what it touches this step (zero if nothing).
     pub(crate) contact_normals: Vec<Vec3>,
+    /// Per particle touching two static colliders at once (on the edge or in the corner of a
+    /// room), the outward normal of the other one (zero otherwise): the volume impulses may
+    /// push it into neither, or they pump it into the one not recorded and the contacts throw
+    /// it back every substep.
+    pub(crate) contact_second: Vec<Vec3>,
     /// Per particle in contact, the share `f` of a push into the contact that the particle keeps:
     /// 0 against a static collider, `w_s / (w_p + w_s)` against a sphere.
     pub(crate) contact_kept: Vec<f32>,
@@ -213,6 +218,7 @@ impl SoftBodyState {
             spring_rest0,
             material,
             contact_normals: vec![Vec3::ZERO; n],
+            contact_second: vec![Vec3::ZERO; n],
             contact_kept: vec![0.0; n],
             friction_anchors: vec![Vec3::NAN; n],
             contact_sphere: vec![u32::MAX; n],
@@ -450,6 +456,7 @@ impl SoftBodyState {
         self.scratch.clamp_bounds.taken_this_step = false;
         for &i in &self.touching {
             self.contact_normals[i as usize] = Vec3::ZERO;
+            self.contact_second[i as usize] = Vec3::ZERO;
             self.contact_sphere[i as usize] = u32::MAX;
         }
         self.touching.clear();

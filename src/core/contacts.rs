@@ -40,6 +40,11 @@ use super::colliders::{
 };
 use super::parallel::{Parallel, Serial, SharedSlice};
 
+/// Two static colliders a particle touches at once count as two contacts (the volume impulses
+/// may push into neither) when the cosine between their normals is below this; nearly parallel
+/// surfaces (two boxes making one floor) are one.
+const DISTINCT_NORMALS: f32 = 0.9;
+
 /// Fastest speed, in m/s, at which a particle already inside a sphere is pushed out of it.
 pub const MAX_DEPENETRATION_SPEED: f32 = 1.0;
 
@@ -101,6 +106,7 @@ impl SoftBodyState {
         // SAFETY: each job reads and writes only its own chunk's particles.
         let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
         let normals = unsafe { SharedSlice::new(&mut self.contact_normals) };
+        let second = unsafe { SharedSlice::new(&mut self.contact_second) };
         let kept = unsafe { SharedSlice::new(&mut self.contact_kept) };
         let sphere = unsafe { SharedSlice::new(&mut self.contact_sphere) };
         let anchors = unsafe { SharedSlice::new(&mut self.friction_anchors) };
@@ -115,6 +121,9 @@ impl SoftBodyState {
                         continue;
                     }
                     let mut touched = false;
+                    // The deepest other collider the particle touches in this pass, if its
+                    // surface faces another way than the last one's.
+                    let mut other = (0.0f32, Vec3::ZERO);
                     static_contact.set(i, [0.0; 2]);
                     for c in colliders {
                         if !filter.interacts_with(c.filter) {
@@ -125,6 +134,13 @@ impl SoftBodyState {
                         let Some((depth, normal)) = c.penetration(xp) else {
                             continue;
                         };
+                        if touched {
+                            let [last_depth, _] = static_contact.get(i);
+                            let last = normals.get(i);
+                            if last.dot(normal) < DISTINCT_NORMALS && last_depth >= other.0 {
+                                other = (last_depth, last);
+                            }
+                        }
                         touched = true;
                         let v = velocities.get(i) + normal * (depth / h);
                         let mu = combined_friction(friction, c.friction);
@@ -142,7 +158,9 @@ impl SoftBodyState {
                         sphere.set(i, u32::MAX);
                         found.contacts += 1;
                     }
-                    if !touched {
+                    if touched {
+                        second.set(i, other.1);
+                    } else {
                         anchors.set(i, Vec3::NAN);
                     }
                 }
@@ -395,6 +413,57 @@ mod tests {
                 crept < 2e-3,
                 "{material:?} on friction {friction}: crept {crept} m in 8 s"
             );
+        }
+    }
+
+    /// A jelly cube resting on the ground against a wall: the particles on the edge between
+    /// the two stay put. Its volume impulses may push them into neither surface; with only the
+    /// last surface recorded they pushed them into the ground, the ground threw them back and
+    /// they kept a vertical velocity of about 0.4 m/s while resting.
+    #[test]
+    fn particles_on_the_edge_of_two_colliders_rest() {
+        let colliders = [Vec3::Y, Vec3::X]
+            .map(|n| ColliderInstance::new(SharedShape::halfspace(n), Pose::IDENTITY, 0.8));
+        let mesh = crate::core::box_grid(UVec3::splat(6), Vec3::splat(0.05), Vec3::ZERO);
+        let mut body = SoftBodyState::new(mesh.unwrap().into(), SoftBodyMaterial::JELLY).unwrap();
+        body.set_sleep_settings(None);
+        let g = Vec3::new(0.0, -9.81, 0.0);
+        let mut fastest = 0.0f32;
+        for step in 0..120 {
+            body.step_with_contacts(1.0 / 60.0, g, &mut [], &colliders);
+            if step < 30 {
+                continue;
+            }
+            let edge = body
+                .positions()
+                .iter()
+                .zip(body.velocities())
+                .filter(|(x, _)| x.x < 2e-3 && x.y < 2e-3);
+            for (_, v) in edge {
+                fastest = fastest.max(v.y.abs());
+            }
+        }
+        assert!(fastest < 0.05, "an edge particle moved at {fastest} m/s");
+    }
+
+    /// A volume impulse's push at a particle between two surfaces goes into neither: between
+    /// a floor and a wall, and in a wedge sharper than a right angle, where taking each push
+    /// out in turn leaves one into the first surface.
+    #[test]
+    fn a_push_between_two_surfaces_goes_into_neither() {
+        let floor = Vec3::Y;
+        for wall in [Vec3::X, Vec3::new(0.8, -0.6, 0.0)] {
+            for d in [
+                Vec3::new(-1.0, -1.0, 0.3),
+                Vec3::new(-1.0, 0.2, 0.0),
+                Vec3::new(0.5, -2.0, -1.0),
+            ] {
+                let c = crate::core::impulses::constrained_push(d, floor, 0.0, wall);
+                assert!(
+                    c.dot(floor) >= -1e-6 && c.dot(wall) >= -1e-6,
+                    "{d} between {floor} and {wall} became {c}"
+                );
+            }
         }
     }
 

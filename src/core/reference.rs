@@ -23,7 +23,7 @@ use glam::{DVec3, Vec3};
 use super::body::SoftBodyState;
 use super::colliders::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume};
-use super::impulses::{RING_STEP_LIMIT, clamp_floor};
+use super::impulses::{RING_STEP_LIMIT, clamp_floor, constrained_push};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::roots::Cubic;
 use super::tet_mesh::NO_TET;
@@ -378,12 +378,7 @@ impl SoftBodyState {
     /// `contact_kept`): the cubic is solved for the motion the particle can make.
     fn reference_constrained(&self, i: usize, d: Vec3) -> Vec3 {
         let n = self.contact_normals[i];
-        let into = d.dot(n);
-        if into < 0.0 {
-            d - n * (into * (1.0 - self.contact_kept[i]))
-        } else {
-            d
-        }
+        constrained_push(d, n, self.contact_kept[i], self.contact_second[i])
     }
 
     /// Adds `dv` to particle `i`'s velocity and predicted position; a push into a sphere the particle

@@ -154,6 +154,31 @@ pub(crate) fn clamp_floor(volume: f32, v0: f32) -> f32 {
     }
 }
 
+/// `d`, a volume impulse's direction at a particle touching a surface of outward unit normal
+/// `n` (zero: none), with its push into that surface reduced to the share `kept` the particle
+/// keeps, and its push into a second static surface `second` (zero: none) taken out; a push
+/// still into the first, hard surface after that (a wedge sharper than a right angle) is
+/// left along their common edge.
+#[inline]
+pub(crate) fn constrained_push(d: Vec3, n: Vec3, kept: f32, second: Vec3) -> Vec3 {
+    let into = d.dot(n);
+    let d = if into < 0.0 {
+        d - n * (into * (1.0 - kept))
+    } else {
+        d
+    };
+    let into_second = d.dot(second);
+    if into_second >= 0.0 {
+        return d;
+    }
+    let d = d - second * into_second;
+    if kept == 0.0 && d.dot(n) < 0.0 {
+        let edge = n.cross(second).normalize_or_zero();
+        return edge * d.dot(edge);
+    }
+    d
+}
+
 /// What the jobs of a pass share: the body's read-only data, and the arrays they write, each
 /// element by one job at a time (see [`super::parallel`]).
 pub(crate) struct VolumePass<'a> {
@@ -162,6 +187,8 @@ pub(crate) struct VolumePass<'a> {
     inv_masses: &'a [f32],
     contact_normals: &'a [Vec3],
     contact_kept: &'a [f32],
+    /// `contact_second`, if any particle touches two static colliders.
+    contact_second: Option<&'a [Vec3]>,
     contact_sphere: &'a [u32],
     /// What `constrain_direction` took from each particle touching another soft body.
     removed: SharedSlice<'a, Vec3>,
@@ -194,11 +221,16 @@ impl VolumePass<'_> {
     #[inline]
     fn constrain_direction(&self, i: usize, d: Vec3) -> Vec3 {
         let n = self.contact_normals[i];
-        let into = d.dot(n);
-        if into < 0.0 {
-            d - n * (into * (1.0 - self.contact_kept[i]))
-        } else {
-            d
+        match self.contact_second {
+            Some(second) => constrained_push(d, n, self.contact_kept[i], second[i]),
+            None => {
+                let into = d.dot(n);
+                if into < 0.0 {
+                    d - n * (into * (1.0 - self.contact_kept[i]))
+                } else {
+                    d
+                }
+            }
         }
     }
 

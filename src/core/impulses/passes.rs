@@ -194,6 +194,7 @@ impl SoftBodyState {
             let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
             let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
             let any_touching = !self.touching.is_empty();
+            let contact_second = second_contacts(&self.touching, &self.contact_second);
             // SAFETY (for the view and every `SharedSlice` below): the pass's phases run one
             // after another; in a chunked phase each chunk writes its own tets', vertices' or
             // regions' entries; in a phase over the blocks a block runs after every block whose
@@ -299,6 +300,7 @@ impl SoftBodyState {
                             inv_masses,
                             contact_normals,
                             contact_kept,
+                            contact_second,
                             contact_sphere,
                             removed,
                             any_touching,
@@ -458,6 +460,7 @@ impl SoftBodyState {
             inv_masses: &self.inv_masses,
             contact_normals: &self.contact_normals,
             contact_kept: &self.contact_kept,
+            contact_second: second_contacts(&self.touching, &self.contact_second),
             contact_sphere: &self.contact_sphere,
             removed: unsafe { SharedSlice::new(&mut self.scratch.soft_removed) },
             any_touching: !self.touching.is_empty(),
@@ -479,4 +482,13 @@ impl SoftBodyState {
             ring_corrected: unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) },
         }
     }
+}
+
+/// `second` (each particle's `contact_second`) when some particle of `touching` touches two
+/// static colliders (the passes then take its pushes out of both), `None` otherwise.
+fn second_contacts<'a>(touching: &[u32], second: &'a [Vec3]) -> Option<&'a [Vec3]> {
+    touching
+        .iter()
+        .any(|&i| second[i as usize] != Vec3::ZERO)
+        .then_some(second)
 }

@@ -78,6 +78,23 @@ impl VolumePass<'_> {
                 let into = dk.dot(normal).min(f32x4::ZERO);
                 *dk = *dk - normal.scale(into * (f32x4::ONE - kept));
             }
+            if let Some(second) = self.contact_second {
+                for (k, dk) in d.iter_mut().enumerate() {
+                    let mut lanes = dk.to_vecs();
+                    for (l, dl) in lanes.iter_mut().enumerate() {
+                        let i = tets[l][k] as usize;
+                        if second[i] != Vec3::ZERO {
+                            *dl = constrained_push(
+                                original[k].to_vecs()[l],
+                                self.contact_normals[i],
+                                self.contact_kept[i],
+                                second[i],
+                            );
+                        }
+                    }
+                    *dk = Vec3x4::from_vecs(lanes);
+                }
+            }
         }
         let f = [d[0] - d[3], d[1] - d[3], d[2] - d[3]];
         let [c1, c2, c3] = volume_polynomial_lanes([ea, eb, ec], [ga, gb, gc], f);
