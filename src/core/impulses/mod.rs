@@ -32,7 +32,7 @@ use std::ops::Range;
 use std::sync::atomic::{AtomicU32, Ordering};
 
 use glam::Vec3;
-use wide::{CmpGe, CmpGt, CmpLe, CmpNe, f32x4};
+use wide::{CmpEq, CmpGe, CmpGt, CmpLe, CmpLt, CmpNe, f32x4};
 
 use super::colliders::RigidSphereState;
 use super::geometry::{

@@ -77,22 +77,25 @@ impl VolumePass<'_> {
                 }));
                 let into = dk.dot(normal).min(f32x4::ZERO);
                 *dk = *dk - normal.scale(into * (f32x4::ONE - kept));
-            }
-            if let Some(second) = self.contact_second {
-                for (k, dk) in d.iter_mut().enumerate() {
-                    let mut lanes = dk.to_vecs();
-                    for (l, dl) in lanes.iter_mut().enumerate() {
-                        let i = tets[l][k] as usize;
-                        if second[i] != Vec3::ZERO {
-                            *dl = constrained_push(
-                                original[k].to_vecs()[l],
-                                self.contact_normals[i],
-                                self.contact_kept[i],
-                                second[i],
-                            );
-                        }
-                    }
-                    *dk = Vec3x4::from_vecs(lanes);
+                if let Some(second) = self.contact_second {
+                    // `constrained_push`'s second surface, in lanes.
+                    let second =
+                        Vec3x4::from_vecs(std::array::from_fn(|l| second[tets[l][k] as usize]));
+                    let into = dk.dot(second);
+                    let pushed = *dk - second.scale(into.min(f32x4::ZERO));
+                    let edge = normal.cross(second);
+                    let along = edge.scale(
+                        pushed.dot(edge)
+                            / edge.length_squared().max(f32x4::splat(f32::MIN_POSITIVE)),
+                    );
+                    let back_in = into.cmp_lt(f32x4::ZERO)
+                        & pushed.dot(normal).cmp_lt(f32x4::ZERO)
+                        & kept.cmp_eq(f32x4::ZERO);
+                    *dk = Vec3x4 {
+                        x: back_in.blend(along.x, pushed.x),
+                        y: back_in.blend(along.y, pushed.y),
+                        z: back_in.blend(along.z, pushed.z),
+                    };
                 }
             }
         }
