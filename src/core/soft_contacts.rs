@@ -398,7 +398,13 @@ fn nearest_triangle(
     // the particle lies most squarely over, so that a particle over the top face next to its
     // edge is met by the top face, not by the side face below the same edge, whichever the
     // grid lists first.
-    let mut nearest: Option<([usize; 3], f32, f32)> = None;
+    // How squarely `xp` lies over the triangle with corners `end` whose closest point is at
+    // `offset` from it: computed only where two triangles are as near.
+    let squarely = |end: &[Vec3; 3], offset: Vec3| {
+        let normal = (end[1] - end[0]).cross(end[2] - end[0]).normalize_or_zero();
+        offset.normalize_or_zero().dot(normal).abs()
+    };
+    let mut nearest: Option<([usize; 3], [Vec3; 3], Vec3, f32)> = None;
     grid.for_each_near(swept, |k| {
         let tri = triangles[k as usize];
         if skip(tri) {
@@ -409,14 +415,14 @@ fn nearest_triangle(
         let q = closest_barycentric(xp, end[0], end[1], end[2]);
         let offset = xp - (end[0] * q.x + end[1] * q.y + end[2] * q.z);
         let distance = offset.length_squared();
-        let normal = (end[1] - end[0]).cross(end[2] - end[0]).normalize_or_zero();
-        let squarely = offset.normalize_or_zero().dot(normal).abs();
-        let better = nearest.is_none_or(|(_, best, best_squarely)| {
+        let better = nearest.is_none_or(|(_, best_end, best_offset, best)| {
             let tie = 1e-6 * best.max(distance) + 1e-14;
-            distance < best - tie || (distance <= best + tie && squarely > best_squarely)
+            distance < best - tie
+                || (distance <= best + tie
+                    && squarely(&end, offset) > squarely(&best_end, best_offset))
         });
         if better {
-            nearest = Some((corners, distance, squarely));
+            nearest = Some((corners, end, offset, distance));
         }
     });
     nearest.map(|(corners, ..)| corners)
