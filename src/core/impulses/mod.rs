@@ -220,18 +220,8 @@ impl VolumePass<'_> {
     /// solved for the motion the particle can make, so the last contact pass does not undo it.
     #[inline]
     fn constrain_direction(&self, i: usize, d: Vec3) -> Vec3 {
-        let n = self.contact_normals[i];
-        match self.contact_second {
-            Some(second) => constrained_push(d, n, self.contact_kept[i], second[i]),
-            None => {
-                let into = d.dot(n);
-                if into < 0.0 {
-                    d - n * (into * (1.0 - self.contact_kept[i]))
-                } else {
-                    d
-                }
-            }
-        }
+        let second = self.contact_second.map_or(Vec3::ZERO, |second| second[i]);
+        constrained_push(d, self.contact_normals[i], self.contact_kept[i], second)
     }
 
     /// Adds `dv` to particle `i`'s velocity; if `i` is pressed against a sphere and `dv` pushes
