@@ -2,14 +2,16 @@
 //!
 //! cargo run --release --all-features --example bench -- [--threads N[,N...]] [--only NAME]
 //!
-//! prints one line per run, `scene=NAME method=NAME threads=N tets=N mean_step_ms=X`: the five
+//! prints one line per run, `scene=NAME method=NAME threads=N tets=N mean_step_ms=X
+//! max_step_ms=X` (the slowest step): the five
 //! paper scenes with the three methods (`baseline`, `paper`, `xpbd` with 10 substeps unless
 //! `--xpbd-substeps N`) over their whole duration, boxes of 1 000 to 200 000 tets
 //! settling on the ground (100 steps; the small ones again from the start, 18 and 2 times),
 //! and 16 bodies of 1080 tets dropped side by side on the ground; then, at 60 Hz and Earth
 //! gravity, every game scene (`game_scenes`) and 16 jelly cubes of 2 560 tets dropped from
 //! 0.3 m, over their first 3 s (`jellies_16`) and over 10 s, in which they settle and fall
-//! asleep (`jellies_16_10s`), with the paper's method and XPBD. `mean_step_ms` is the
+//! asleep (`jellies_16_10s`), and the meshes other tools made (`GameScene::bundled`, named
+//! `MESH_PRESET`), with the paper's method and XPBD. `mean_step_ms` is the
 //! wall-clock time of the plugin's stages per step, all bodies together
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
 //! between the stages is not in it. A scene's three methods run side by side, in turns of 50
@@ -171,6 +173,7 @@ fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, SoftBodyStepTime)> 
 /// Adds `more`'s steps and times to `clock`'s.
 fn add_clock(clock: &mut SoftBodyStepTime, more: &SoftBodyStepTime) {
     clock.total_ms += more.total_ms;
+    clock.max_ms = clock.max_ms.max(more.max_ms);
     clock.steps += more.steps;
     clock.stages_total.add(&more.stages_total);
 }
@@ -211,7 +214,7 @@ fn bench(
         }
     }
     for (&(threads, method), (tets, clock)) in runs.iter().zip(results) {
-        report(name, method.name(), threads, tets, clock.mean_ms());
+        report(name, method.name(), threads, tets, &clock);
         if args.stages {
             let s = clock.mean_stage_ms();
             println!(
@@ -228,8 +231,12 @@ fn bench(
     }
 }
 
-fn report(scene: &str, method: &str, threads: usize, tets: usize, ms: f64) {
-    println!("scene={scene} method={method} threads={threads} tets={tets} mean_step_ms={ms:.3}");
+fn report(scene: &str, method: &str, threads: usize, tets: usize, clock: &SoftBodyStepTime) {
+    println!(
+        "scene={scene} method={method} threads={threads} tets={tets} mean_step_ms={:.3} max_step_ms={:.3}",
+        clock.mean_ms(),
+        clock.max_ms
+    );
 }
 
 fn main() {
@@ -350,6 +357,25 @@ fn main() {
                 scene
                     .spawn(&mut world.commands(), method, Vec3::ZERO)
                     .expect("the standard scenes build");
+            },
+        );
+    }
+    // The meshes other tools made, 1 m across, in every preset, dropped from 0.5 m
+    // (`GameScene::bundled`): what a game's own mesh costs.
+    for scene in GameScene::bundled() {
+        if !wanted(&scene.name) {
+            continue;
+        }
+        let steps = (scene.duration_secs * 60.0).round() as u32;
+        bench(
+            &args,
+            &scene.name,
+            &game_methods,
+            (steps, 1, 60.0),
+            |world, method| {
+                scene
+                    .spawn(&mut world.commands(), method, Vec3::ZERO)
+                    .expect("the bundled meshes build");
             },
         );
     }

@@ -1,15 +1,19 @@
-//! Drops any mesh on the ground with the paper's method:
+//! Drops any mesh on the ground at game scale, as a game would: "try your mesh".
 //!
-//! cargo run --release --all-features --example drop -- MESH [--tets N] [--seconds S] [--headless]
+//! cargo run --release --all-features --example drop -- MESH [--preset jelly] [--size 1]
+//!     [--hz 60] [--method paper|xpbd] [--tets N] [--seconds S] [--headless]
 //!
 //! `MESH` is an OBJ file (tetrahedralized to about `N` tets, default 6000) or a TetGen mesh
 //! given by its `.node` file (the `.ele` beside it). The model is scaled so that its largest
-//! side is 2 m (the size of the paper's creature; printed as `scale`) and dropped with the
-//! creature scene's material, gravity and speed, its lowest point 0.5 m above the ground.
-//! Headless, it prints the volume error after every simulated second, then
-//! `peak_volume_error_pct: X` and `mean_step_ms: Y`. In a window (feature `examples`) it shows
-//! the model's own surface (for TetGen input, the tet mesh's boundary) embedded in the tets;
-//! `--screenshot PATH --frames N` saves a picture and exits.
+//! side is `--size` metres (default 1; printed as `scale`) and dropped at Earth gravity in a
+//! preset material (`jelly`, `flesh`, `rubber`, `hard_rubber`) from rest, its lowest point
+//! 0.5 m above the ground, stepped at `--hz` (30 to 240) with the paper's method or XPBD (10
+//! substeps). Headless, it prints the volume error after every simulated second, then one line
+//! as `bench` prints its own: `mesh=NAME preset=NAME method=NAME hz=N tets=N mean_step_ms=X
+//! max_step_ms=X peak_volume_error_pct=X final_inverted_tets=N asleep_s=X` (`-`: not asleep at
+//! the end). In a window (feature `examples`) it shows the model's own surface (for TetGen
+//! input, the tet mesh's boundary) embedded in the tets; `--screenshot PATH --frames N` saves a
+//! picture and exits.
 
 #[cfg(feature = "examples")]
 mod common;
@@ -20,14 +24,12 @@ use std::time::Duration;
 
 use bevy::prelude::*;
 use bevy_soft_body::core::{
-    Resolution, TetMesh, TriangleSurface, VolumeMethod, parse_obj, parse_tetgen, tetrahedralize,
+    Resolution, TetMesh, TriangleSurface, VolumeMethod, XpbdSettings, parse_obj, parse_tetgen,
+    tetrahedralize,
 };
 use bevy_soft_body::prelude::*;
-use bevy_soft_body::scenes::PaperScene;
 use clap::Parser;
 
-/// Largest side of the dropped model, metres.
-const SIZE: f32 = 2.0;
 /// Height of the model's lowest point above the ground when dropped, metres.
 const LIFT: f32 = 0.5;
 
@@ -40,8 +42,20 @@ struct Args {
     /// Tets for an OBJ mesh
     #[arg(long, default_value_t = 6000)]
     tets: u32,
+    /// The material: jelly, flesh, rubber or hard_rubber
+    #[arg(long, default_value = "jelly", value_parser = ["jelly", "flesh", "rubber", "hard_rubber"])]
+    preset: String,
+    /// Largest side of the model, metres
+    #[arg(long, default_value_t = 1.0, value_parser = size)]
+    size: f32,
+    /// Steps a second
+    #[arg(long, default_value_t = 60.0, value_parser = rate)]
+    hz: f32,
+    /// How the volume is kept: paper (the impulses) or xpbd (10 substeps)
+    #[arg(long, default_value = "paper", value_parser = ["paper", "xpbd"])]
+    method: String,
     /// Simulated seconds, headless
-    #[arg(long, default_value_t = 6.0, value_parser = seconds)]
+    #[arg(long, default_value_t = 3.0, value_parser = seconds)]
     seconds: f32,
     /// No window: print the volume error every second
     #[arg(long)]
@@ -55,6 +69,22 @@ struct Args {
     /// Start with the debug gizmos on
     #[arg(long)]
     gizmos: bool,
+}
+
+fn size(value: &str) -> Result<f32, String> {
+    value
+        .parse()
+        .ok()
+        .filter(|s: &f32| s.is_finite() && *s >= 0.01 && *s <= 100.0)
+        .ok_or(format!("`{value}` is not a size from 0.01 to 100 m"))
+}
+
+fn rate(value: &str) -> Result<f32, String> {
+    value
+        .parse()
+        .ok()
+        .filter(|s: &f32| s.is_finite() && *s >= 30.0 && *s <= 240.0)
+        .ok_or(format!("`{value}` is not a rate from 30 to 240 Hz"))
 }
 
 fn seconds(value: &str) -> Result<f32, String> {
@@ -101,20 +131,32 @@ fn load(path: &Path, tets: u32) -> Result<(TetMesh, TriangleSurface), String> {
     }
 }
 
-/// Spawns the model (scaled to [`SIZE`], lowest point [`LIFT`] above the ground at the origin),
-/// the ground and the gravity; returns the body and the scale.
-fn spawn(commands: &mut Commands, mesh: Arc<TetMesh>) -> (Entity, f32) {
-    let scene = PaperScene::Creature;
-    commands.insert_resource(SoftBodyGravity(scene.gravity()));
+/// The material the command line asks for.
+fn material(args: &Args) -> SoftBodyMaterial {
+    let preset = SoftBodyMaterial::PRESETS
+        .iter()
+        .find(|(name, _)| *name == args.preset)
+        .map_or(SoftBodyMaterial::JELLY, |p| p.1);
+    let method = match args.method.as_str() {
+        "xpbd" => VolumeMethod::Xpbd(XpbdSettings { substeps: 10 }),
+        _ => VolumeMethod::PAPER_IMPULSES,
+    };
+    preset.with_method(method)
+}
+
+/// Spawns the model (scaled to `size`, lowest point [`LIFT`] above the ground at the origin)
+/// and the ground, at Earth gravity (the plugin's default); returns the body and the scale.
+fn spawn(
+    commands: &mut Commands,
+    mesh: Arc<TetMesh>,
+    material: SoftBodyMaterial,
+    size: f32,
+) -> (Entity, f32) {
     let (lo, hi) = mesh.bounds();
-    let scale = SIZE / (hi - lo).max_element();
+    let scale = size / (hi - lo).max_element();
     let centre = (lo + hi) * 0.5 * scale;
     let place = Vec3::new(-centre.x, LIFT - lo.y * scale, -centre.z);
-    let mut body = SoftBody::new(mesh, scene.material(VolumeMethod::PAPER_IMPULSES))
-        .expect("the creature's material is valid");
-    for v in body.state_mut().velocities_mut() {
-        v.y = -scene.params().speed;
-    }
+    let body = SoftBody::new(mesh, material).expect("the presets are valid");
     let entity = commands
         .spawn((
             body,
@@ -130,37 +172,42 @@ fn spawn(commands: &mut Commands, mesh: Arc<TetMesh>) -> (Entity, f32) {
     (entity, scale)
 }
 
-fn headless(mesh: TetMesh, seconds: f32) {
+fn headless(mesh: TetMesh, args: &Args) {
+    let hz = args.hz as f64;
     let mut app = App::new();
     app.add_plugins((MinimalPlugins, SoftBodyPlugin::default()))
         .insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
-            Duration::from_millis(10),
-        ));
+            Duration::from_secs_f64(1.0 / hz),
+        ))
+        .insert_resource(Time::<Fixed>::from_hz(hz))
+        .insert_resource(SoftBodyThreads { max_threads: 1 });
     let tets = mesh.tet_count();
     let (body, scale) = {
         let world = app.world_mut();
         let mut commands = world.commands();
-        let spawned = spawn(&mut commands, Arc::new(mesh));
+        let spawned = spawn(&mut commands, Arc::new(mesh), material(args), args.size);
         world.flush();
         spawned
     };
     println!("tets: {tets}");
     println!("scale: {scale:.4}");
-    // The first update only starts the clock; after it, every update is one 10 ms step.
+    // The first update only starts the clock; after it, every update is one step.
     app.update();
-    let steps = (seconds * 100.0).round() as u32;
+    let steps = (args.seconds as f64 * hz).round() as u32;
+    let (mut max_step_ms, mut asleep_from) = (0.0f64, None);
     for step in 1..=steps {
         app.update();
-        if step % 100 == 0 || step == steps {
-            let stats = app
-                .world()
-                .get::<SoftBodyStats>(body)
-                .expect("spawned above");
+        let stats = app
+            .world()
+            .get::<SoftBodyStats>(body)
+            .expect("spawned above");
+        max_step_ms = max_step_ms.max(stats.step_ms);
+        let t = step as f64 / hz;
+        asleep_from = stats.sleeping.then(|| asleep_from.unwrap_or(t));
+        if step % hz.round() as u32 == 0 || step == steps {
             println!(
-                "second {:.2}: volume_error_pct {:+.4} (inverted tets {})",
-                step as f32 / 100.0,
-                stats.volume_error_pct,
-                stats.inverted_tets
+                "second {t:.2}: volume_error_pct {:+.4} (inverted tets {})",
+                stats.volume_error_pct, stats.inverted_tets
             );
         }
     }
@@ -168,8 +215,21 @@ fn headless(mesh: TetMesh, seconds: f32) {
         .world()
         .get::<SoftBodyStats>(body)
         .expect("spawned above");
-    println!("peak_volume_error_pct: {:.4}", stats.peak_volume_error_pct);
-    println!("mean_step_ms: {:.3}", stats.mean_step_ms());
+    let name = args
+        .mesh
+        .file_stem()
+        .map_or("mesh".into(), |s| s.to_string_lossy());
+    println!(
+        "mesh={name} preset={} method={} hz={} tets={tets} mean_step_ms={:.3} max_step_ms={max_step_ms:.3} \
+         peak_volume_error_pct={:.4} final_inverted_tets={} asleep_s={}",
+        args.preset,
+        args.method,
+        args.hz,
+        stats.mean_step_ms(),
+        stats.peak_volume_error_pct,
+        stats.inverted_tets,
+        asleep_from.map_or("-".to_string(), |t| format!("{t:.2}")),
+    );
 }
 
 #[cfg(feature = "examples")]
@@ -182,14 +242,23 @@ fn windowed(mesh: TetMesh, surface: TriangleSurface, args: &Args) -> AppExit {
         scene: None,
         gizmos: args.gizmos,
     };
+    let (material, size) = (material(args), args.size);
     let mut app = common::example_app_with("bevy_soft_body: drop", None, options);
+    let hz = args.hz as f64;
+    app.insert_resource(Time::<Fixed>::from_hz(hz));
+    if args.screenshot.is_some() {
+        // One step a frame.
+        app.insert_resource(bevy::time::TimeUpdateStrategy::ManualDuration(
+            Duration::from_secs_f64(1.0 / hz),
+        ));
+    }
     app.add_systems(
         Startup,
         move |mut commands: Commands,
               mut meshes: ResMut<Assets<Mesh>>,
               mut materials: ResMut<Assets<StandardMaterial>>,
               mut camera: Query<(&mut common::OrbitCamera, &mut Transform)>| {
-            let (body, _) = spawn(&mut commands, mesh.clone());
+            let (body, _) = spawn(&mut commands, mesh.clone(), material, size);
             commands.entity(body).insert((
                 SoftBodySurface::new(body),
                 Mesh3d(meshes.add(surface_mesh(&surface))),
@@ -202,8 +271,8 @@ fn windowed(mesh: TetMesh, surface: TriangleSurface, args: &Args) -> AppExit {
                 common::SceneMember,
             ));
             if let Ok((mut orbit, mut transform)) = camera.single_mut() {
-                let half = Vec3::new(SIZE, 0.0, SIZE) * 0.5;
-                common::frame_camera(&mut orbit, -half, half + Vec3::Y * (SIZE + LIFT));
+                let half = Vec3::new(size, 0.0, size) * 0.5;
+                common::frame_camera(&mut orbit, -half, half + Vec3::Y * (size + LIFT));
                 *transform = orbit.transform();
             }
         },
@@ -221,7 +290,7 @@ fn main() -> AppExit {
         }
     };
     if args.headless {
-        headless(mesh, args.seconds);
+        headless(mesh, &args);
         return AppExit::Success;
     }
     #[cfg(feature = "examples")]

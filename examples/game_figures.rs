@@ -5,7 +5,9 @@
 //!
 //! Columns: scene, method, hz, material, tets, peak and final volume error (percent), final
 //! mean per-tet error, lowest and final height over rest height, most inverted tets, whether it
-//! stayed finite, runaways caught, mean step ms (one thread, wall clock). `volume_error.png`
+//! stayed finite, runaways caught, mean and slowest step ms (one thread, wall clock), inverted
+//! tets at the end, when it landed and when it fell asleep for good (s, `-` for never).
+//! `--bundled` runs the meshes other tools made (`GameScene::bundled`) instead. `volume_error.png`
 //! beside it: each scene's volume error over time, every method, at the first rate.
 
 use std::io::Write;
@@ -26,6 +28,10 @@ struct Args {
     /// Only the scenes whose name contains this.
     #[arg(long)]
     only: Option<String>,
+    /// The meshes other tools made (`GameScene::bundled`: each in every preset) instead of
+    /// the standard scenes.
+    #[arg(long)]
+    bundled: bool,
     /// Step rates, Hz.
     #[arg(long, value_delimiter = ',', default_values_t = [30.0, 60.0, 120.0])]
     hz: Vec<f32>,
@@ -134,8 +140,15 @@ fn export(dir: &std::path::Path, scenes: &[GameScene]) -> Result<(), String> {
 
 fn main() -> Result<(), String> {
     let args = Args::parse();
+    let all = || {
+        if args.bundled {
+            GameScene::bundled()
+        } else {
+            GameScene::standard()
+        }
+    };
     if let Some(dir) = &args.export {
-        let scenes: Vec<GameScene> = GameScene::standard()
+        let scenes: Vec<GameScene> = all()
             .into_iter()
             .filter(|s| {
                 args.only
@@ -148,13 +161,13 @@ fn main() -> Result<(), String> {
     let mut rows = vec![
         "scene,method,hz,material,tets,peak_volume_error_pct,final_volume_error_pct,\
          final_mean_tet_error_pct,lowest_height,final_height,max_inverted_tets,finite,runaways,\
-         mean_step_ms"
+         mean_step_ms,max_step_ms,final_inverted_tets,landed_s,asleep_s,mean_substeps"
             .to_string(),
     ];
     println!("{}", rows[0]);
     // Per scene and method, at the first rate: the volume error over time, for the figure.
     let mut curves: Vec<Curve> = Vec::new();
-    for mut scene in GameScene::standard() {
+    for mut scene in all() {
         if args
             .only
             .as_ref()
@@ -187,8 +200,9 @@ fn main() -> Result<(), String> {
                         series,
                     ));
                 }
+                let time = |t: Option<f32>| t.map_or("-".to_string(), |t| format!("{t:.2}"));
                 let row = format!(
-                    "{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{:.4}",
+                    "{},{},{},{},{},{:.4},{:.4},{:.4},{:.4},{:.4},{},{},{},{:.4},{:.4},{},{},{},{:.1}",
                     scene.name,
                     name,
                     hz,
@@ -202,7 +216,12 @@ fn main() -> Result<(), String> {
                     r.max_inverted_tets,
                     r.finite,
                     r.runaways,
-                    r.mean_step_ms
+                    r.mean_step_ms,
+                    r.max_step_ms,
+                    r.final_inverted_tets,
+                    time(r.landed_at),
+                    time(r.asleep_from),
+                    r.mean_substeps
                 );
                 println!("{row}");
                 rows.push(row);
@@ -215,7 +234,7 @@ fn main() -> Result<(), String> {
     ];
     if args.xpbd_match {
         println!("{}", matches[0]);
-        for scene in GameScene::standard() {
+        for scene in all() {
             if args
                 .only
                 .as_ref()

@@ -54,6 +54,73 @@ pub enum GameShape {
         /// Tets wanted.
         tets: u32,
     },
+    /// A tet mesh made by another tool, as it is, scaled so that its largest side is `size`, m.
+    Bundled {
+        /// The mesh.
+        mesh: BundledMesh,
+        /// Largest side, m.
+        size: f32,
+    },
+}
+
+/// Tet meshes made by other tools, shipped with the crate (`assets/meshes/`, each with its
+/// source and licence in that folder's README): the irregular meshes (slivers, short edges,
+/// tets of very different sizes side by side) that games bring, as the bench and the tests run
+/// them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BundledMesh {
+    /// The Stanford bunny as Ten Minute Physics tetrahedralized it (1 351 tets).
+    Bunny,
+    /// The dragon of Ten Minute Physics' skinning demo (3 840 tets).
+    Dragon,
+    /// The creature's surface (`assets/creature.obj`) tetrahedralized by TetGen.
+    CreatureTetgen,
+    /// The creature's surface tetrahedralized by fTetWild.
+    CreatureFtetwild,
+}
+
+impl BundledMesh {
+    /// Every bundled mesh.
+    pub const ALL: [BundledMesh; 4] = [
+        BundledMesh::Bunny,
+        BundledMesh::Dragon,
+        BundledMesh::CreatureTetgen,
+        BundledMesh::CreatureFtetwild,
+    ];
+
+    /// Its name in tables and file names.
+    pub fn name(self) -> &'static str {
+        match self {
+            BundledMesh::Bunny => "bunny_tmp",
+            BundledMesh::Dragon => "dragon_tmp",
+            BundledMesh::CreatureTetgen => "creature_tetgen",
+            BundledMesh::CreatureFtetwild => "creature_ftetwild",
+        }
+    }
+
+    /// Its TetGen files, `.node` and `.ele`.
+    pub fn tetgen_files(self) -> (&'static str, &'static str) {
+        macro_rules! files {
+            ($name:literal) => {
+                (
+                    include_str!(concat!("../assets/meshes/", $name, ".node")),
+                    include_str!(concat!("../assets/meshes/", $name, ".ele")),
+                )
+            };
+        }
+        match self {
+            BundledMesh::Bunny => files!("bunny_tmp"),
+            BundledMesh::Dragon => files!("dragon_tmp"),
+            BundledMesh::CreatureTetgen => files!("creature_tetgen"),
+            BundledMesh::CreatureFtetwild => files!("creature_ftetwild"),
+        }
+    }
+
+    /// The mesh, as its files give it.
+    pub fn load(self) -> Result<TetMesh, crate::core::TetGenError> {
+        let (node, ele) = self.tetgen_files();
+        crate::core::parse_tetgen(node, ele)
+    }
 }
 
 /// How a grid body's mesh is distorted, to stand for the irregular meshes other tools write.
@@ -246,6 +313,23 @@ impl GameScene {
         scenes
     }
 
+    /// The meshes other tools made ([`BundledMesh`]), each 1 m across in every preset, dropped
+    /// from 0.5 m: what a game that brings its own mesh gets. Named `MESH_PRESET`.
+    pub fn bundled() -> Vec<GameScene> {
+        let mut scenes = Vec::new();
+        for mesh in BundledMesh::ALL {
+            for preset in SoftBodyMaterial::PRESETS {
+                scenes.push(GameScene::new(
+                    &format!("{}_{}", mesh.name(), preset.0),
+                    GameShape::Bundled { mesh, size: 1.0 },
+                    preset,
+                    0.5,
+                ));
+            }
+        }
+        scenes
+    }
+
     /// The body's tet mesh in its own frame, its lowest point at y = 0, centred in x and z.
     pub fn tet_mesh(&self) -> Result<TetMesh, GameSceneError> {
         let error = |reason: String| self.error(reason);
@@ -279,6 +363,13 @@ impl GameScene {
                 tetrahedralize(&positions, &surface.indices, Resolution::TargetTets(tets))
                     .map_err(|e| error(e.to_string()))?
                     .mesh
+            }
+            GameShape::Bundled { mesh, size } => {
+                let mesh = mesh.load().map_err(|e| error(e.to_string()))?;
+                let (lo, hi) = mesh.bounds();
+                let scale = size / (hi - lo).max_element();
+                let positions = mesh.positions().iter().map(|p| *p * scale).collect();
+                TetMesh::new(positions, mesh.tets().to_vec()).map_err(|e| error(e.to_string()))?
             }
         };
         let mesh = distort(mesh, self.mesh).map_err(|e| error(e.to_string()))?;
@@ -492,8 +583,18 @@ pub struct GameRun {
     pub runaways: u32,
     /// Mean wall-clock time of a step, ms.
     pub mean_step_ms: f64,
+    /// Slowest step, ms.
+    pub max_step_ms: f64,
+    /// Mean substeps a step.
+    pub mean_substeps: f64,
     /// Tets of the body.
     pub tets: usize,
+    /// Inverted tets at the end.
+    pub final_inverted_tets: usize,
+    /// When a particle first touched a collider, s.
+    pub landed_at: Option<f32>,
+    /// When the body fell asleep for the rest of the run, s.
+    pub asleep_from: Option<f32>,
 }
 
 impl GameScene {
@@ -523,9 +624,21 @@ impl GameScene {
         for step in 0..steps {
             let start = std::time::Instant::now();
             world.step(h);
-            elapsed += start.elapsed();
+            let took = start.elapsed();
+            elapsed += took;
+            run.max_step_ms = run.max_step_ms.max(took.as_secs_f64() * 1e3);
+            run.mean_substeps += world.body.counters().substeps as f64 / steps as f64;
+            let t = (step + 1) as f32 * h;
+            if run.landed_at.is_none() && world.body.contacts().next().is_some() {
+                run.landed_at = Some(t);
+            }
+            run.asleep_from = match (world.body.is_sleeping(), run.asleep_from) {
+                (true, None) => Some(t),
+                (true, since) => since,
+                (false, _) => None,
+            };
             let m = world.body.volume_metrics();
-            record((step + 1) as f32 * h, m.volume_error_pct);
+            record(t, m.volume_error_pct);
             run.finite &= m.volume.is_finite();
             run.peak_volume_error_pct = run.peak_volume_error_pct.max(m.volume_error_pct.abs());
             run.max_inverted_tets = run.max_inverted_tets.max(m.inverted_tets);
@@ -533,6 +646,7 @@ impl GameScene {
             run.lowest_height = run.lowest_height.min(world.height_ratio());
             run.final_volume_error_pct = m.volume_error_pct;
             run.final_mean_tet_error_pct = m.mean_abs_tet_error_pct;
+            run.final_inverted_tets = m.inverted_tets;
         }
         run.final_height = world.height_ratio();
         run.mean_step_ms = elapsed.as_secs_f64() * 1e3 / steps.max(1) as f64;

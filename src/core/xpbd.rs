@@ -96,6 +96,7 @@ impl SoftBodyState {
             Some(n) => n.max(1),
             None => self.substeps_needed(h, spheres, colliders, 0.0)?,
         };
+        self.counters.substeps = substeps;
         let volumes = self.material.method.is_xpbd();
         let hs = h / substeps as f32;
         // Stiffness-proportional damping in the shape projection (physical materials), or

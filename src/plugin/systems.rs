@@ -282,6 +282,7 @@ pub(super) fn finish_step(
     }
     clock.last_ms = clock.current.as_secs_f64() * 1e3;
     clock.total_ms += clock.last_ms;
+    clock.max_ms = clock.max_ms.max(clock.last_ms);
     clock.steps += 1;
     clock.current = Duration::ZERO;
 }

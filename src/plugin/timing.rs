@@ -12,6 +12,8 @@ pub struct SoftBodyStepTime {
     pub last_ms: f64,
     /// All steps so far, in milliseconds.
     pub total_ms: f64,
+    /// The slowest step so far, in milliseconds.
+    pub max_ms: f64,
     /// Steps so far.
     pub steps: u64,
     /// All steps so far, stage by stage: where the time goes. The stages add up to

@@ -77,6 +77,8 @@ pub struct StepCounters {
     pub ring_checks_skipped: u32,
     /// Particles whose new position would not have been finite: kept in place and stopped.
     pub non_finite_velocities: u32,
+    /// Substeps the step took (0 for a body not solved in substeps, or asleep).
+    pub substeps: u32,
 }
 
 /// What one impulse did.
