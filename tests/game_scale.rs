@@ -6,7 +6,7 @@ use std::time::Duration;
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
 use bevy_soft_body::core::VolumeMethod;
-use bevy_soft_body::game_scenes::{GameScene, GameShape, MeshStyle};
+use bevy_soft_body::game_scenes::{BundledMesh, GameScene, GameShape, MeshStyle};
 use bevy_soft_body::prelude::*;
 
 const RATES: [f32; 3] = [30.0, 60.0, 120.0];
@@ -39,6 +39,26 @@ fn every_game_scene_stays_finite_and_keeps_its_volume_under_one_percent() {
                 scene.name
             );
         }
+    }
+}
+
+/// The meshes other tools made (`assets/meshes`), as a game brings them: each loads with the
+/// tets its README lists, and dropped as a jelly (the softest preset, the deepest squash) at
+/// 60 Hz stays finite, is never caught running away and keeps its volume within 1 %.
+#[test]
+fn meshes_other_tools_made_keep_their_volume_under_one_percent() {
+    let tets = [1351, 3840, 4182, 1856];
+    for (mesh, tets) in BundledMesh::ALL.into_iter().zip(tets) {
+        assert_eq!(mesh.load().unwrap().tet_count(), tets, "{mesh:?}");
+    }
+    for scene in GameScene::bundled()
+        .into_iter()
+        .filter(|s| s.material_name == "jelly")
+    {
+        let r = scene.run(VolumeMethod::PAPER_IMPULSES, 60.0).unwrap();
+        assert!(r.finite, "{}: {r:?}", scene.name);
+        assert_eq!(r.runaways, 0, "{}: {r:?}", scene.name);
+        assert!(r.peak_volume_error_pct < 1.0, "{}: {r:?}", scene.name);
     }
 }
 
