@@ -343,26 +343,12 @@ fn main() {
         .copied()
         .filter(|m| !matches!(m, VolumeMethod::Baseline { .. }))
         .collect();
-    for scene in GameScene::standard() {
-        if !wanted(&scene.name) {
-            continue;
-        }
-        let steps = (scene.duration_secs * 60.0).round() as u32;
-        bench(
-            &args,
-            &scene.name,
-            &game_methods,
-            (steps, 1, 60.0),
-            |world, method| {
-                scene
-                    .spawn(&mut world.commands(), method, Vec3::ZERO)
-                    .expect("the standard scenes build");
-            },
-        );
-    }
-    // The meshes other tools made, 1 m across, in every preset, dropped from 0.5 m
+    // Then the meshes other tools made, 1 m across, in every preset, dropped from 0.5 m
     // (`GameScene::bundled`): what a game's own mesh costs.
-    for scene in GameScene::bundled() {
+    for scene in GameScene::standard()
+        .into_iter()
+        .chain(GameScene::bundled())
+    {
         if !wanted(&scene.name) {
             continue;
         }
@@ -375,7 +361,7 @@ fn main() {
             |world, method| {
                 scene
                     .spawn(&mut world.commands(), method, Vec3::ZERO)
-                    .expect("the bundled meshes build");
+                    .expect("the standard and bundled scenes build");
             },
         );
     }

@@ -71,28 +71,25 @@ struct Args {
     gizmos: bool,
 }
 
-fn size(value: &str) -> Result<f32, String> {
+/// `value` as a number in `range`, or what it should have been.
+fn within(value: &str, range: std::ops::RangeInclusive<f32>, what: &str) -> Result<f32, String> {
     value
         .parse()
         .ok()
-        .filter(|s: &f32| s.is_finite() && *s >= 0.01 && *s <= 100.0)
-        .ok_or(format!("`{value}` is not a size from 0.01 to 100 m"))
+        .filter(|s: &f32| range.contains(s))
+        .ok_or(format!("`{value}` is not {what}"))
+}
+
+fn size(value: &str) -> Result<f32, String> {
+    within(value, 0.01..=100.0, "a size from 0.01 to 100 m")
 }
 
 fn rate(value: &str) -> Result<f32, String> {
-    value
-        .parse()
-        .ok()
-        .filter(|s: &f32| s.is_finite() && *s >= 30.0 && *s <= 240.0)
-        .ok_or(format!("`{value}` is not a rate from 30 to 240 Hz"))
+    within(value, 30.0..=240.0, "a rate from 30 to 240 Hz")
 }
 
 fn seconds(value: &str) -> Result<f32, String> {
-    value
-        .parse()
-        .ok()
-        .filter(|s: &f32| s.is_finite() && *s > 0.0 && *s <= 3600.0)
-        .ok_or(format!("`{value}` is not a duration up to 3600"))
+    within(value, 0.001..=3600.0, "a duration up to 3600 s")
 }
 
 /// The tet mesh and the surface to show, read from `path`.
