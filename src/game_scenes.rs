@@ -632,11 +632,10 @@ impl GameScene {
             if run.landed_at.is_none() && world.body.contacts().next().is_some() {
                 run.landed_at = Some(t);
             }
-            run.asleep_from = match (world.body.is_sleeping(), run.asleep_from) {
-                (true, None) => Some(t),
-                (true, since) => since,
-                (false, _) => None,
-            };
+            run.asleep_from = world
+                .body
+                .is_sleeping()
+                .then(|| run.asleep_from.unwrap_or(t));
             let m = world.body.volume_metrics();
             record(t, m.volume_error_pct);
             run.finite &= m.volume.is_finite();
