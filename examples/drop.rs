@@ -286,6 +286,9 @@ fn main() -> AppExit {
             return AppExit::from_code(1);
         }
     };
+    if !mesh.defects().is_empty() {
+        eprintln!("warning: {}: {}", args.mesh.display(), mesh.defects());
+    }
     if args.headless {
         headless(mesh, &args);
         return AppExit::Success;

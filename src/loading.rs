@@ -88,6 +88,10 @@ impl AssetLoader for TetGenLoader {
         // Parsing validates the whole mesh; it is linear in the file size, fine on the loader's
         // task.
         let mesh = crate::core::parse_tetgen(&node, &ele)?;
+        if !mesh.defects().is_empty() {
+            // The body made of it reports them again, as a `SoftBodyError`, when it is placed.
+            warn!("{node_path}: {}", mesh.defects());
+        }
         Ok(TetMeshAsset(Arc::new(mesh)))
     }
 

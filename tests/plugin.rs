@@ -331,3 +331,56 @@ fn spawn_transform_places_rotates_and_scales_the_body() {
     assert_eq!(transform.rotation, Quat::IDENTITY);
     assert_eq!(transform.scale, Vec3::ONE);
 }
+
+#[test]
+fn a_mesh_whose_tets_fold_is_reported_once_when_placed() {
+    // A cube whose inner vertex is moved most of a cell towards the opposite corner: the tets on
+    // that side turn inside out and fold over their neighbours. The body is still simulated,
+    // and said to be broken once.
+    let grid = cube(3);
+    let mut positions = grid.positions().to_vec();
+    let tets = grid.tets().to_vec();
+    let centre = positions
+        .iter()
+        .position(|p| p.distance(Vec3::splat(0.1)) < 1e-6)
+        .unwrap();
+    positions[centre] += Vec3::splat(0.09);
+    let broken = Arc::new(TetMesh::new(positions, tets).unwrap());
+    assert!(broken.defects().folded_count > 0, "{}", broken.defects());
+
+    let mut app = app(Vec3::ZERO);
+    #[derive(Resource, Default)]
+    struct Seen(Vec<SoftBodyError>);
+    app.init_resource::<Seen>().add_systems(
+        Update,
+        |mut r: MessageReader<SoftBodyError>, mut seen: ResMut<Seen>| {
+            seen.0.extend(r.read().cloned());
+        },
+    );
+    let material = material(VolumeMethod::PAPER_IMPULSES);
+    let folded = app
+        .world_mut()
+        .spawn(SoftBody::new(broken.clone(), material).unwrap())
+        .id();
+    let clean = app
+        .world_mut()
+        .spawn(SoftBody::new(cube(3), material).unwrap())
+        .id();
+    for _ in 0..10 {
+        app.update();
+    }
+    let seen = &app.world().resource::<Seen>().0;
+    assert_eq!(
+        seen,
+        &vec![SoftBodyError {
+            body: folded,
+            kind: SoftBodyErrorKind::MeshDefects(broken.defects().clone()),
+        }]
+    );
+    assert!(!seen.iter().any(|e| e.body == clean));
+    let message = seen[0].to_string();
+    for &[a, b] in &broken.defects().folded {
+        assert!(message.contains(&format!("{a}/{b}")), "{message}");
+    }
+    assert_eq!(app.world().get::<SoftBodyStats>(folded).unwrap().steps, 10);
+}

@@ -90,6 +90,11 @@ pub enum SoftBodyErrorKind {
     /// was put back in its rest shape, at rest, where it last was sane. Reported once per
     /// spell of runaways; `SoftBodyStats::runaway_resets` counts them all.
     Runaway(Runaway),
+    /// The body's tet mesh has tets that fold over a neighbour or overlap another (see
+    /// [`TetMesh::defects`](crate::core::TetMesh::defects)); reported when the body is placed.
+    /// It is simulated as given: the volume passes push those tets apart, and its volume error
+    /// spikes there. Re-mesh the model.
+    MeshDefects(crate::core::MeshDefects),
     /// A render surface (feature `render`) could not be bound to the body; it is not deformed.
     Surface {
         /// The entity of the surface.
@@ -129,6 +134,13 @@ impl std::fmt::Display for SoftBodyError {
                  for its step or its mesh too poor",
                 self.body, r.speed, r.extent, r.rest_extent, r.reset_to
             ),
+            SoftBodyErrorKind::MeshDefects(defects) => {
+                write!(
+                    f,
+                    "soft body {}: its tet mesh is broken: {defects}",
+                    self.body
+                )
+            }
             SoftBodyErrorKind::Surface { surface, reason } => write!(
                 f,
                 "soft body {}: surface {surface} cannot follow it: {reason}",

@@ -15,6 +15,7 @@ pub(crate) mod grid;
 pub(crate) mod impulses;
 pub(crate) mod lanes;
 pub(crate) mod material;
+pub(crate) mod mesh_check;
 pub(crate) mod obj;
 pub(crate) mod parallel;
 pub(crate) mod reference;
@@ -45,6 +46,7 @@ pub use material::{
     ElasticSettings, Elasticity, ImpulseSettings, MaterialError, Plasticity, SoftBodyMaterial,
     VolumeMethod, XpbdSettings,
 };
+pub use mesh_check::{LISTED_DEFECTS, MeshDefects};
 pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
 pub use runaway::{Runaway, RunawayLimits};

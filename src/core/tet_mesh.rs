@@ -5,6 +5,7 @@ use glam::Vec3;
 
 pub use super::blocks::{Blocks, Csr, NO_TET};
 use super::geometry::{min_dihedral_deg, signed_volume};
+use super::mesh_check::{MeshDefects, find_defects};
 
 /// What is wrong with a tet mesh given to [`TetMesh::new`].
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -101,6 +102,7 @@ pub struct TetMesh {
     tet_neighbours: Csr,
     blocks: Blocks,
     reoriented_tets: usize,
+    defects: MeshDefects,
 }
 
 impl TetMesh {
@@ -289,7 +291,7 @@ impl TetMesh {
             .collect();
         blocks.edges.number_items();
 
-        Ok(TetMesh {
+        let mut mesh = TetMesh {
             positions,
             tets,
             total_rest_volume: rest_volumes.iter().map(|&v| v as f64).sum(),
@@ -304,7 +306,10 @@ impl TetMesh {
             tet_neighbours,
             blocks,
             reoriented_tets,
-        })
+            defects: MeshDefects::default(),
+        };
+        mesh.defects = find_defects(&mesh);
+        Ok(mesh)
     }
 
     /// Rest positions of the vertices.
@@ -413,6 +418,12 @@ impl TetMesh {
     /// How many input tets had negative orientation and were reoriented.
     pub fn reoriented_tets(&self) -> usize {
         self.reoriented_tets
+    }
+
+    /// The tets that fold over a neighbour or overlap another (see `mesh_check.rs`): found
+    /// when the mesh is built, reported by the loaders, `drop` and the plugin as a warning.
+    pub fn defects(&self) -> &MeshDefects {
+        &self.defects
     }
 
     /// The particles whose rest positions lie in `region` (mesh coordinates), in index order:

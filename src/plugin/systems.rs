@@ -37,6 +37,16 @@ pub(super) fn prepare(
     for (entity, mut body, mut transform, pinned, driven) in &mut bodies {
         let body = &mut *body;
         if !body.placed {
+            let defects = body.state.mesh().defects();
+            if !defects.is_empty() {
+                report(
+                    &mut errors,
+                    SoftBodyError {
+                        body: entity,
+                        kind: SoftBodyErrorKind::MeshDefects(defects.clone()),
+                    },
+                );
+            }
             let placement = *transform;
             if placement.scale != Vec3::ONE {
                 match scaled_mesh(body.state.mesh(), placement.scale)
