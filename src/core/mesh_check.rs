@@ -3,7 +3,7 @@
 //! the body holds, and the volume passes, which restore every tet to its own rest volume, push
 //! the overlapping tets apart: the body swells there and its volume error spikes. Nothing in the
 //! solver can tell which of two overlapping tets is the wrong one, so the mesh is reported when
-//! it is built ([`TetMesh::defects`]), with the tets named, and left as it is: the fix is to
+//! it is built (`TetMesh::defects`), with the tets named, and left as it is: the fix is to
 //! re-mesh.
 
 use std::collections::HashMap;
@@ -11,7 +11,6 @@ use std::collections::HashMap;
 use glam::{IVec3, Vec3};
 
 use super::geometry::signed_volume;
-use super::tet_mesh::TetMesh;
 
 /// A point counts as inside a tet when each of its barycentric coordinates is above this: a
 /// vertex lying on a neighbour's face (as every vertex of a conforming mesh lies on its own
@@ -21,7 +20,7 @@ const INSIDE: f32 = 1e-4;
 /// At most this many tet pairs of each kind are listed; the counts are complete.
 pub const LISTED_DEFECTS: usize = 32;
 
-/// The folds and overlaps of a tet mesh (see [`TetMesh::defects`]). Empty for a mesh a
+/// The folds and overlaps of a tet mesh (see `TetMesh::defects`). Empty for a mesh a
 /// tetrahedralizer made correctly.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct MeshDefects {
@@ -81,11 +80,12 @@ impl std::fmt::Display for MeshDefects {
     }
 }
 
-/// Finds the folds and overlaps of `mesh`: the shared faces from the tets' sorted face keys,
-/// the overlaps from every vertex and centroid tested against the tets whose bounding boxes
-/// hold it (a uniform grid of the mean tet's size). Linear in the tets for a mesh of even size.
-pub(crate) fn find_defects(mesh: &TetMesh) -> MeshDefects {
-    let (x, tets) = (mesh.positions(), mesh.tets());
+/// Finds the folds and overlaps of the tets `tets` on the vertices `x` (every vertex in some
+/// tet, every tet of positive volume `rest_volumes`, as `TetMesh::new` has checked): the shared
+/// faces from the tets' sorted face keys, the overlaps from every vertex and centroid tested
+/// against the tets whose bounding boxes hold it (a uniform grid of the mean tet's size).
+/// Linear in the tets for a mesh of even size.
+pub(crate) fn find_defects(x: &[Vec3], tets: &[[u32; 4]], rest_volumes: &[f32]) -> MeshDefects {
     let mut defects = MeshDefects::default();
 
     // Folds: two tets across a face, their opposite vertices on the same side of it.
@@ -114,8 +114,11 @@ pub(crate) fn find_defects(mesh: &TetMesh) -> MeshDefects {
     }
 
     // Overlaps: a point of one tet strictly inside another that does not hold it as a vertex.
-    let (lo, hi) = mesh.bounds();
-    let mean_size = (mesh.total_rest_volume() / tets.len() as f64).cbrt() as f32;
+    let (lo, hi) = x
+        .iter()
+        .fold((x[0], x[0]), |(lo, hi), &p| (lo.min(p), hi.max(p)));
+    let total: f64 = rest_volumes.iter().map(|&v| v as f64).sum();
+    let mean_size = (total / tets.len() as f64).cbrt() as f32;
     let cell = (2.0 * mean_size).max((hi - lo).max_element() / 1024.0);
     let key = |p: Vec3| ((p - lo) / cell).floor().as_ivec3();
     let mut grid: HashMap<IVec3, Vec<u32>> = HashMap::new();
@@ -159,9 +162,15 @@ pub(crate) fn find_defects(mesh: &TetMesh) -> MeshDefects {
         pairs.extend(found.iter().map(|&u| [t as u32, u]));
     }
     // A vertex inside a tet it is not a corner of: the pair is that tet and one of the vertex's.
+    let mut a_tet_of = vec![u32::MAX; x.len()];
+    for (t, tet) in tets.iter().enumerate() {
+        for &i in tet {
+            a_tet_of[i as usize] = t as u32;
+        }
+    }
     for (v, &point) in x.iter().enumerate() {
         holding(point, u32::MAX, v as u32, &mut found);
-        pairs.extend(found.iter().map(|&u| [mesh.one_ring(v)[0], u]));
+        pairs.extend(found.iter().map(|&u| [a_tet_of[v], u]));
     }
     for pair in &mut pairs {
         pair.sort_unstable();
@@ -197,56 +206,4 @@ fn strictly_inside(point: Vec3, p: [Vec3; 4]) -> bool {
         q[k] = point;
         signed_volume(&q) / volume > INSIDE
     })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::core::grid::box_grid;
-    use glam::UVec3;
-
-    #[test]
-    fn a_grid_has_no_defects() {
-        let mesh = box_grid(UVec3::new(4, 3, 5), Vec3::splat(0.1), Vec3::ZERO).unwrap();
-        assert_eq!(mesh.defects(), &MeshDefects::default());
-    }
-
-    #[test]
-    fn a_tet_folded_over_its_neighbour_is_named() {
-        // Two tets on the face (0, 1, 2), their apexes 3 and 4 on the same side of it.
-        let positions = vec![
-            Vec3::ZERO,
-            Vec3::X,
-            Vec3::Y,
-            Vec3::new(0.2, 0.2, 1.0),
-            Vec3::new(0.3, 0.3, 0.5),
-        ];
-        let mesh = TetMesh::new(positions, vec![[0, 1, 2, 3], [0, 1, 2, 4]]).unwrap();
-        let defects = mesh.defects();
-        assert_eq!(defects.folded, vec![[0, 1]]);
-        assert_eq!(defects.folded_count, 1);
-        assert_eq!(defects.overlapping_count, 0, "{defects}");
-        assert!(defects.to_string().contains("tets 0/1"), "{defects}");
-    }
-
-    #[test]
-    fn tets_that_overlap_without_sharing_a_face_are_named() {
-        // A grid and a separate tet placed inside one of its cells.
-        let grid = box_grid(UVec3::splat(2), Vec3::splat(1.0), Vec3::ZERO).unwrap();
-        let mut positions = grid.positions().to_vec();
-        let mut tets = grid.tets().to_vec();
-        let n = positions.len() as u32;
-        let c = Vec3::splat(0.5);
-        positions.extend([c, c + Vec3::X * 0.2, c + Vec3::Y * 0.2, c + Vec3::Z * 0.2]);
-        tets.push([n, n + 1, n + 2, n + 3]);
-        let mesh = TetMesh::new(positions, tets).unwrap();
-        let defects = mesh.defects();
-        assert_eq!(defects.folded_count, 0);
-        assert!(defects.overlapping_count >= 1, "{defects}");
-        let added = grid.tet_count() as u32;
-        assert!(
-            defects.overlapping.iter().all(|p| p.contains(&added)),
-            "{defects}"
-        );
-    }
 }

@@ -308,7 +308,7 @@ impl TetMesh {
             reoriented_tets,
             defects: MeshDefects::default(),
         };
-        mesh.defects = find_defects(&mesh);
+        mesh.defects = find_defects(&mesh.positions, &mesh.tets, &mesh.rest_volumes);
         Ok(mesh)
     }
 
@@ -527,6 +527,8 @@ impl ParticleRegion {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::grid::box_grid;
+    use glam::UVec3;
 
     fn unit_tet() -> (Vec<Vec3>, Vec<[u32; 4]>) {
         (
@@ -602,7 +604,7 @@ mod tests {
     #[test]
     fn boundary_surface_of_a_grid_is_its_box() {
         let m = crate::core::grid::box_grid(
-            glam::UVec3::new(3, 2, 4),
+            UVec3::new(3, 2, 4),
             Vec3::splat(0.5),
             Vec3::new(1.0, 2.0, 3.0),
         )
@@ -633,9 +635,7 @@ mod tests {
 
     #[test]
     fn ring_corners_put_the_centre_last_and_keep_each_tets_volume() {
-        let m =
-            crate::core::grid::box_grid(glam::UVec3::new(3, 3, 2), Vec3::splat(0.5), Vec3::ZERO)
-                .unwrap();
+        let m = box_grid(UVec3::new(3, 3, 2), Vec3::splat(0.5), Vec3::ZERO).unwrap();
         for p in 0..m.vertex_count() {
             let ring = m.ring_vertices(p);
             for (&t, corners) in m.one_ring(p).iter().zip(m.ring_corners(p)) {
@@ -667,5 +667,52 @@ mod tests {
         assert!(m.ring_border_tets(0).is_empty());
         assert_eq!(m.tet_neighbours(0), &[1]);
         assert_eq!(m.edges().len(), 9);
+    }
+
+    // What `mesh_check.rs` finds, through the mesh that reports it.
+
+    #[test]
+    fn a_grid_has_no_defects() {
+        let mesh = box_grid(UVec3::new(4, 3, 5), Vec3::splat(0.1), Vec3::ZERO).unwrap();
+        assert_eq!(mesh.defects(), &MeshDefects::default());
+    }
+
+    #[test]
+    fn a_tet_folded_over_its_neighbour_is_named() {
+        // Two tets on the face (0, 1, 2), their apexes 3 and 4 on the same side of it.
+        let positions = vec![
+            Vec3::ZERO,
+            Vec3::X,
+            Vec3::Y,
+            Vec3::new(0.2, 0.2, 1.0),
+            Vec3::new(0.3, 0.3, 0.5),
+        ];
+        let mesh = TetMesh::new(positions, vec![[0, 1, 2, 3], [0, 1, 2, 4]]).unwrap();
+        let defects = mesh.defects();
+        assert_eq!(defects.folded, vec![[0, 1]]);
+        assert_eq!(defects.folded_count, 1);
+        assert_eq!(defects.overlapping_count, 0, "{defects}");
+        assert!(defects.to_string().contains("tets 0/1"), "{defects}");
+    }
+
+    #[test]
+    fn tets_that_overlap_without_sharing_a_face_are_named() {
+        // A grid and a separate tet placed inside one of its cells.
+        let grid = box_grid(UVec3::splat(2), Vec3::splat(1.0), Vec3::ZERO).unwrap();
+        let mut positions = grid.positions().to_vec();
+        let mut tets = grid.tets().to_vec();
+        let n = positions.len() as u32;
+        let c = Vec3::splat(0.5);
+        positions.extend([c, c + Vec3::X * 0.2, c + Vec3::Y * 0.2, c + Vec3::Z * 0.2]);
+        tets.push([n, n + 1, n + 2, n + 3]);
+        let mesh = TetMesh::new(positions, tets).unwrap();
+        let defects = mesh.defects();
+        assert_eq!(defects.folded_count, 0);
+        assert!(defects.overlapping_count >= 1, "{defects}");
+        let added = grid.tet_count() as u32;
+        assert!(
+            defects.overlapping.iter().all(|p| p.contains(&added)),
+            "{defects}"
+        );
     }
 }
