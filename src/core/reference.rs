@@ -250,10 +250,9 @@ impl SoftBodyState {
             .collect();
         let ring_rest = mesh.ring_rest_volume(p);
         let ring_error: f64 = errors.iter().map(|&e| e as f64).sum();
-        let tets_within = ring
-            .iter()
-            .zip(&errors)
-            .all(|(&t, e)| e.abs() <= settings.ring_tet_tolerance * rest(t));
+        let tets_within = ring.iter().zip(&errors).all(|(&t, e)| {
+            mesh.is_sliver(t as usize) || e.abs() <= settings.ring_tet_tolerance * rest(t)
+        });
         if ring_error.abs() <= settings.tolerance as f64 * ring_rest && tets_within {
             return;
         }

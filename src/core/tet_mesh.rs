@@ -76,6 +76,13 @@ pub enum TetMeshError {
 /// A regular tet has about 0.118; slivers below 1e-6 carry no usable volume gradient in `f32`.
 const DEGENERATE_RATIO: f32 = 1e-6;
 
+/// A tet whose rest volume is below this fraction of its longest edge cubed is a sliver (a
+/// regular tet has 0.118, the grids' 0.059 and 0.118): a motion a small fraction of its edges
+/// flattens or flips it, and no ring impulse around it can hold its volume within a percent.
+/// Its ring does not count it against `ImpulseSettings::ring_tet_tolerance`; its own volume is
+/// left to the per-tet pass and the shape solve.
+pub const SLIVER_RATIO: f32 = 3e-3;
+
 /// A validated tetrahedral mesh with the adjacency the solver needs. Immutable once built;
 /// share it between bodies with an `Arc`.
 #[derive(Clone, Debug)]
@@ -99,6 +106,11 @@ pub struct TetMesh {
     ring_rest_volumes: Vec<f32>,
     /// Each one-ring's rest volume, its tets' rest volumes summed in `f64` in ring order.
     ring_rest_totals: Vec<f64>,
+    /// For each tet of each one-ring, the rest volume its ring's check holds it to within
+    /// `ring_tet_tolerance`: its rest volume, or infinity for a sliver (see [`SLIVER_RATIO`]).
+    ring_check_volumes: Vec<f32>,
+    /// Per tet, whether it is a sliver.
+    slivers: Vec<bool>,
     tet_neighbours: Csr,
     blocks: Blocks,
     reoriented_tets: usize,
@@ -250,6 +262,28 @@ impl TetMesh {
             }
         }
 
+        let slivers: Vec<bool> = tets
+            .iter()
+            .zip(&rest_volumes)
+            .map(|(tet, &v)| {
+                let p = tet.map(|i| positions[i as usize]);
+                let longest = (0..4)
+                    .flat_map(|a| (a + 1..4).map(move |b| (a, b)))
+                    .map(|(a, b)| p[a].distance(p[b]))
+                    .fold(0.0f32, f32::max);
+                v < SLIVER_RATIO * longest.powi(3)
+            })
+            .collect();
+        let ring_check_volumes: Vec<f32> = (0..n)
+            .flat_map(|p| one_rings.row(p))
+            .map(|&t| {
+                if slivers[t as usize] {
+                    f32::INFINITY
+                } else {
+                    rest_volumes[t as usize]
+                }
+            })
+            .collect();
         let ring_rest_volumes: Vec<f32> = (0..n)
             .flat_map(|p| one_rings.row(p))
             .map(|&t| rest_volumes[t as usize])
@@ -303,6 +337,8 @@ impl TetMesh {
             ring_corners,
             ring_rest_volumes,
             ring_rest_totals,
+            ring_check_volumes,
+            slivers,
             tet_neighbours,
             blocks,
             reoriented_tets,
@@ -413,6 +449,17 @@ impl TetMesh {
     /// Number of tets.
     pub fn tet_count(&self) -> usize {
         self.tets.len()
+    }
+
+    /// The rest volumes each tet of `p`'s one-ring is held to by the ring's check (see
+    /// `ring_check_volumes`).
+    pub(crate) fn ring_check_volumes(&self, p: usize) -> &[f32] {
+        &self.ring_check_volumes[self.one_rings.range(p)]
+    }
+
+    /// Whether tet `t` is a sliver (see [`SLIVER_RATIO`]).
+    pub fn is_sliver(&self, t: usize) -> bool {
+        self.slivers[t]
     }
 
     /// How many input tets had negative orientation and were reoriented.
