@@ -88,7 +88,9 @@ pub struct ImpulseSettings {
     /// error is spread among its tets is the per-tet pass's to even out, and a ring whose tets
     /// are off in opposite directions gets a root that the ring step limit cuts short (little
     /// motion at a ring impulse's full cost). Equal to `tolerance`, a ring is corrected whenever
-    /// any of its tets is off by more than that.
+    /// any of its tets is off by more than that. Slivers do not count (see
+    /// [`TetMesh::is_sliver`](crate::core::TetMesh::is_sliver)): no ring impulse holds them,
+    /// and retrying their rings every substep was much of an irregular mesh's cost at rest.
     ///
     /// Default: 0.01 (1 %, the error the method is held to; PERFORMANCE.md, "The tolerances").
     pub ring_tet_tolerance: f32,
