@@ -21,6 +21,19 @@ fn app(gravity: Vec3) -> App {
     app
 }
 
+/// Every `SoftBodyError` sent, in order.
+#[derive(Resource, Default)]
+struct SeenErrors(Vec<SoftBodyError>);
+
+fn record_errors(app: &mut App) {
+    app.init_resource::<SeenErrors>().add_systems(
+        Update,
+        |mut r: MessageReader<SoftBodyError>, mut seen: ResMut<SeenErrors>| {
+            seen.0.extend(r.read().cloned());
+        },
+    );
+}
+
 fn cube(cells: u32) -> Arc<TetMesh> {
     Arc::new(box_grid(UVec3::splat(cells), Vec3::splat(0.1), Vec3::ZERO).unwrap())
 }
@@ -215,14 +228,7 @@ fn bad_input_gives_errors_not_panics() {
     // Out-of-range pinned particles and a driven target that does not exist: logged, the game
     // goes on, and the valid indices still apply.
     let mut app = app(Vec3::new(0.0, -1.0, 0.0));
-    #[derive(Resource, Default)]
-    struct Seen(Vec<SoftBodyError>);
-    app.init_resource::<Seen>().add_systems(
-        Update,
-        |mut r: MessageReader<SoftBodyError>, mut seen: ResMut<Seen>| {
-            seen.0.extend(r.read().cloned());
-        },
-    );
+    record_errors(&mut app);
     let missing = app.world_mut().spawn_empty().id();
     app.world_mut().despawn(missing);
     let body = app
@@ -253,7 +259,7 @@ fn bad_input_gives_errors_not_panics() {
         "the rest of the body did not fall"
     );
     // Each problem is reported once, as a message a game can read, not once per step.
-    let seen = &app.world().resource::<Seen>().0;
+    let seen = &app.world().resource::<SeenErrors>().0;
     let count = state.positions().len();
     assert_eq!(
         seen,
@@ -349,14 +355,7 @@ fn a_mesh_whose_tets_fold_is_reported_once_when_placed() {
     assert!(broken.defects().folded_count > 0, "{}", broken.defects());
 
     let mut app = app(Vec3::ZERO);
-    #[derive(Resource, Default)]
-    struct Seen(Vec<SoftBodyError>);
-    app.init_resource::<Seen>().add_systems(
-        Update,
-        |mut r: MessageReader<SoftBodyError>, mut seen: ResMut<Seen>| {
-            seen.0.extend(r.read().cloned());
-        },
-    );
+    record_errors(&mut app);
     let material = material(VolumeMethod::PAPER_IMPULSES);
     let folded = app
         .world_mut()
@@ -369,7 +368,7 @@ fn a_mesh_whose_tets_fold_is_reported_once_when_placed() {
     for _ in 0..10 {
         app.update();
     }
-    let seen = &app.world().resource::<Seen>().0;
+    let seen = &app.world().resource::<SeenErrors>().0;
     assert_eq!(
         seen,
         &vec![SoftBodyError {

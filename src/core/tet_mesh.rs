@@ -138,6 +138,7 @@ impl TetMesh {
         }
         let n = positions.len();
         let mut rest_volumes = Vec::with_capacity(tets.len());
+        let mut slivers = Vec::with_capacity(tets.len());
         let mut reoriented_tets = 0;
         let mut used = vec![false; n];
         for (t, tet) in tets.iter_mut().enumerate() {
@@ -178,6 +179,7 @@ impl TetMesh {
                 reoriented_tets += 1;
             }
             rest_volumes.push(volume);
+            slivers.push(volume < SLIVER_RATIO * longest_edge.powi(3));
         }
         if let Some(vertex) = used.iter().position(|&u| !u) {
             return Err(TetMeshError::UnreferencedVertex { vertex });
@@ -262,18 +264,6 @@ impl TetMesh {
             }
         }
 
-        let slivers: Vec<bool> = tets
-            .iter()
-            .zip(&rest_volumes)
-            .map(|(tet, &v)| {
-                let p = tet.map(|i| positions[i as usize]);
-                let longest = (0..4)
-                    .flat_map(|a| (a + 1..4).map(move |b| (a, b)))
-                    .map(|(a, b)| p[a].distance(p[b]))
-                    .fold(0.0f32, f32::max);
-                v < SLIVER_RATIO * longest.powi(3)
-            })
-            .collect();
         let ring_check_volumes: Vec<f32> = (0..n)
             .flat_map(|p| one_rings.row(p))
             .map(|&t| {
