@@ -111,6 +111,8 @@ pub struct TetMesh {
     ring_check_volumes: Vec<f32>,
     /// Per tet, whether it is a sliver.
     slivers: Vec<bool>,
+    /// Per vertex, whether its one-ring holds a sliver.
+    ring_slivers: Vec<bool>,
     tet_neighbours: Csr,
     blocks: Blocks,
     reoriented_tets: usize,
@@ -264,6 +266,9 @@ impl TetMesh {
             }
         }
 
+        let ring_slivers: Vec<bool> = (0..n)
+            .map(|p| one_rings.row(p).iter().any(|&t| slivers[t as usize]))
+            .collect();
         let ring_check_volumes: Vec<f32> = (0..n)
             .flat_map(|p| one_rings.row(p))
             .map(|&t| {
@@ -328,6 +333,7 @@ impl TetMesh {
             ring_rest_volumes,
             ring_rest_totals,
             ring_check_volumes,
+            ring_slivers,
             slivers,
             tet_neighbours,
             blocks,
@@ -445,6 +451,11 @@ impl TetMesh {
     /// `ring_check_volumes`).
     pub(crate) fn ring_check_volumes(&self, p: usize) -> &[f32] {
         &self.ring_check_volumes[self.one_rings.range(p)]
+    }
+
+    /// Whether one of the tets of `p`'s one-ring is a sliver.
+    pub(crate) fn ring_has_sliver(&self, p: usize) -> bool {
+        self.ring_slivers[p]
     }
 
     /// Whether tet `t` is a sliver: its rest volume is under `SLIVER_RATIO` (3e-3) of its

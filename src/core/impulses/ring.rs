@@ -194,29 +194,33 @@ impl VolumePass<'_> {
         let mut tet_outside_tolerance = f32x4::ZERO;
         let mut ring_error = f32x4::ZERO;
         let ring_tet_tolerance = f32x4::splat(settings.ring_tet_tolerance);
-        let checked = mesh.ring_check_volumes(p);
-        let check_volume = |group: usize| {
-            f32x4::new(std::array::from_fn(|l| {
+        // A ring with a sliver holds its tets to `ring_check_volumes` (the sliver's infinite);
+        // any other to their rest volumes, read with them.
+        let checked = mesh.ring_has_sliver(p).then(|| mesh.ring_check_volumes(p));
+        let check_volume = |group: usize, v0: f32x4| match checked {
+            None => v0,
+            Some(checked) => f32x4::new(std::array::from_fn(|l| {
                 checked.get(LANES * group + l).copied().unwrap_or(0.0)
-            }))
+            })),
         };
         let computed = self.ring_corrected.get(p);
         if computed {
             for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
-                let (full, _) = ring_group_lanes(&work.predicted, ring_v0, corners, group);
+                let (full, v0) = ring_group_lanes(&work.predicted, ring_v0, corners, group);
                 *lanes = full;
                 tet_outside_tolerance |= full
                     .error
                     .abs()
-                    .cmp_gt(ring_tet_tolerance * check_volume(group));
+                    .cmp_gt(ring_tet_tolerance * check_volume(group, v0));
                 ring_error += full.error;
             }
         } else {
             for group in 0..groups {
                 let (edges, v0) = ring_group_edges(&work.predicted, ring_v0, corners, group);
                 let error = edges[0].dot(edges[1].cross(edges[2]).scale(sixth)) - v0;
-                tet_outside_tolerance |=
-                    error.abs().cmp_gt(ring_tet_tolerance * check_volume(group));
+                tet_outside_tolerance |= error
+                    .abs()
+                    .cmp_gt(ring_tet_tolerance * check_volume(group, v0));
                 ring_error += error;
             }
         }
