@@ -66,7 +66,9 @@ pub struct ImpulseSettings {
     /// Also correct every tet on its own, scaled by `gamma` (end of section 5), so that volume
     /// cannot drift from one tet of a ring into another.
     pub per_tet: bool,
-    /// The fraction of the per-tet correction applied (the paper's `gamma = 1/8`).
+    /// The fraction of the per-tet correction applied (the paper's `gamma = 1/8`). A tet whose
+    /// predicted volume is inverted gets its whole correction instead: a fold to repair, not a
+    /// deformation to leave to the rings.
     pub gamma: f32,
     /// Shorten an impulse so that no tet it touches falls below half its rest volume
     /// (section 4's clamp with `eps = V0 / 2`).

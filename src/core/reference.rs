@@ -23,7 +23,7 @@ use glam::{DVec3, Vec3};
 use super::body::SoftBodyState;
 use super::colliders::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume};
-use super::impulses::{RING_STEP_LIMIT, clamp_floor, constrained_push};
+use super::impulses::{INVERTED_TET_GAMMA, RING_STEP_LIMIT, clamp_floor, constrained_push};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::roots::Cubic;
 use super::tet_mesh::NO_TET;
@@ -330,7 +330,12 @@ impl SoftBodyState {
         let Some(root) = monotone_root(&cubic) else {
             return;
         };
-        let mut step = settings.gamma as f64 * root;
+        let gamma = if volume(p) <= 0.0 {
+            INVERTED_TET_GAMMA
+        } else {
+            settings.gamma as f64
+        };
+        let mut step = gamma * root;
         if settings.neighbour_clamp {
             let itself = t as u32;
             let touched = std::iter::once(&itself).chain(mesh.tet_neighbours(t));

@@ -128,6 +128,14 @@ enum ClampRegions {
 /// and fully again once its tets agree.
 pub const RING_STEP_LIMIT: f64 = 1.0;
 
+/// The per-tet pass's `gamma` for a tet whose predicted volume is inverted: its whole
+/// correction, not the paper's eighth. `gamma` keeps the per-tet pass from locking a body that
+/// its rings let deform; a flipped tet is not such a deformation but a fold, which the paper
+/// expects its impulses to repair (section 4). At an eighth a step, slivers (nearly flat at
+/// rest, so flipped by a tiny motion) and tets crushed through by a landing stayed inverted
+/// to the end of a run. The neighbour clamp still bounds the correction.
+pub const INVERTED_TET_GAMMA: f64 = 1.0;
+
 /// How much of its rest volume a tet that is already below `eps` may lose in one impulse.
 pub const CLAMP_SLACK: f32 = 0.1;
 

@@ -126,7 +126,12 @@ impl VolumePass<'_> {
                 outcomes[l] = ImpulseOutcome::NoRoot;
                 continue;
             };
-            let full = gamma * root;
+            // An inverted tet gets its whole correction (see `INVERTED_TET_GAMMA`).
+            let full = if volume[l] <= 0.0 {
+                INVERTED_TET_GAMMA
+            } else {
+                gamma
+            } * root;
             let mut step = full;
             if clamp {
                 let t = bundle[l];
