@@ -45,8 +45,7 @@ fn every_game_scene_stays_finite_and_keeps_its_volume_under_one_percent() {
 /// The meshes other tools made (`assets/meshes`), as a game brings them: each loads with the
 /// tets its README lists, and dropped in every preset at 60 Hz stays finite, is never caught
 /// running away, keeps its volume within 1 % and ends with no tet inverted (their slivers
-/// flip at a touch, and the bunny's flesh kept one flipped until inverted tets got their whole
-/// per-tet correction).
+/// flip at a touch; the per-tet pass must flip them back).
 #[test]
 fn meshes_other_tools_made_keep_their_volume_under_one_percent() {
     let tets = [1351, 3840, 4182, 1856];
