@@ -131,9 +131,9 @@ pub const RING_STEP_LIMIT: f64 = 1.0;
 /// The per-tet pass's `gamma` for a tet whose predicted volume is inverted: its whole
 /// correction, not the paper's eighth. `gamma` keeps the per-tet pass from locking a body that
 /// its rings let deform; a flipped tet is not such a deformation but a fold, which the paper
-/// expects its impulses to repair (section 4). At an eighth a step, slivers (nearly flat at
-/// rest, so flipped by a tiny motion) and tets crushed through by a landing stayed inverted
-/// to the end of a run. The neighbour clamp still bounds the correction.
+/// expects its impulses to repair (section 4). A sliver, nearly flat at rest, flips at a tiny
+/// motion and an eighth of a correction a step may never flip it back (PERFORMANCE.md,
+/// "Inverted tets get their whole per-tet correction"). The neighbour clamp still bounds it.
 pub const INVERTED_TET_GAMMA: f64 = 1.0;
 
 /// How much of its rest volume a tet that is already below `eps` may lose in one impulse.
