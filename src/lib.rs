@@ -70,8 +70,9 @@ pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSystems
 /// feature `avian` [`SoftBodyAvianPlugin`](crate::avian::SoftBodyAvianPlugin) (soft bodies
 /// among avian's rigid bodies), and with feature `render` [`SoftBodySurfacePlugin`] (render meshes that
 /// follow the bodies) and [`SoftBodyAssetPlugin`] (bodies from
-/// meshes and files; it needs Bevy's asset and mesh plugins, as in `DefaultPlugins`). Each part
-/// can be replaced or left out, as in any plugin group:
+/// meshes and files). The last two need Bevy's asset and mesh plugins, as in `DefaultPlugins`; in
+/// an app without them (`MinimalPlugins`, a headless server) they add nothing and log why, so the
+/// group fits any app. Each part can be replaced or left out, as in any plugin group:
 ///
 /// ```
 /// use bevy::prelude::*;
@@ -79,7 +80,7 @@ pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSystems
 ///
 /// // The simulation in `FixedPostUpdate`, at the game's fixed rate.
 /// let plugins = SoftBodyPlugins.set(SoftBodyPlugin::new(FixedPostUpdate));
-/// // A headless server has no meshes to draw or assets to build bodies from.
+/// // A headless server has no meshes to draw: leaving the render parts out says so.
 /// #[cfg(feature = "render")]
 /// let plugins = plugins
 ///     .disable::<SoftBodySurfacePlugin>()

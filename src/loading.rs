@@ -207,14 +207,44 @@ impl Default for SoftBodyAssetPlugin {
     }
 }
 
+/// The plugin needs Bevy's asset and mesh plugins (both in `DefaultPlugins`). Added after them,
+/// it registers in `build`; added before them, in `finish` (which `App::run` calls). An app
+/// without them (`MinimalPlugins`, a headless server) gets no asset loading and a log line
+/// saying so, not a panic: `SoftBody::new` needs no assets.
 impl Plugin for SoftBodyAssetPlugin {
     fn build(&self, app: &mut App) {
+        self.register(app);
+    }
+
+    fn finish(&self, app: &mut App) {
+        if !self.register(app) {
+            info!(
+                "SoftBodyAssetPlugin: the app has no AssetServer or Assets<Mesh> (Bevy's \
+                 AssetPlugin and MeshPlugin, part of DefaultPlugins), so bodies are not built \
+                 from assets (SoftBodyFromAsset); SoftBody::new works without them"
+            );
+        }
+    }
+}
+
+impl SoftBodyAssetPlugin {
+    /// Registers the assets, loaders and system once, where the app has the asset server and
+    /// mesh assets; whether they are registered.
+    fn register(&self, app: &mut App) -> bool {
+        let world = app.world();
+        if world.contains_resource::<Assets<TetMeshAsset>>() {
+            return true;
+        }
+        if !world.contains_resource::<AssetServer>() || !world.contains_resource::<Assets<Mesh>>() {
+            return false;
+        }
         app.init_asset::<TetMeshAsset>()
             .init_asset_loader::<TetGenLoader>()
             .add_systems(Update, build_bodies.in_set(SoftBodyAssetSystems));
         if self.obj_loader {
             app.init_asset_loader::<ObjMeshLoader>();
         }
+        true
     }
 }
 

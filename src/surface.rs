@@ -109,18 +109,47 @@ pub struct SoftBodySurfaceSystems;
 )]
 pub type SoftBodySurfaceSet = SoftBodySurfaceSystems;
 
-/// Updates every [`SoftBodySurface`]. Needs the asset and mesh plugins (part of
-/// `DefaultPlugins`) and [`crate::SoftBodyPlugin`].
+/// Updates every [`SoftBodySurface`]. Needs the mesh assets (Bevy's asset and mesh plugins,
+/// part of `DefaultPlugins`) and [`crate::SoftBodyPlugin`]. Added after the mesh plugin, its
+/// system is added in `build`; added before it, in `finish` (which `App::run` calls). An app
+/// without mesh assets (`MinimalPlugins`, a headless server) draws nothing, so the plugin adds
+/// nothing there and logs why.
 pub struct SoftBodySurfacePlugin;
+
+/// Marks that [`SoftBodySurfacePlugin`] added its system.
+#[derive(Resource)]
+struct SurfacesFollow;
 
 impl Plugin for SoftBodySurfacePlugin {
     fn build(&self, app: &mut App) {
         app.configure_sets(
             PostUpdate,
             SoftBodySurfaceSystems.before(VisibilitySystems::CalculateBounds),
-        )
-        .add_systems(PostUpdate, deform_surfaces.in_set(SoftBodySurfaceSystems));
+        );
+        add_surface_system(app);
     }
+
+    fn finish(&self, app: &mut App) {
+        if !add_surface_system(app) {
+            info!(
+                "SoftBodySurfacePlugin: the app has no Assets<Mesh> (Bevy's MeshPlugin, part of \
+                 DefaultPlugins), so no surface follows its body"
+            );
+        }
+    }
+}
+
+/// Adds the surfaces' system once, where the app has mesh assets; whether it is added.
+fn add_surface_system(app: &mut App) -> bool {
+    if app.world().contains_resource::<SurfacesFollow>() {
+        return true;
+    }
+    if !app.world().contains_resource::<Assets<Mesh>>() {
+        return false;
+    }
+    app.insert_resource(SurfacesFollow)
+        .add_systems(PostUpdate, deform_surfaces.in_set(SoftBodySurfaceSystems));
+    true
 }
 
 fn deform_surfaces(

@@ -194,3 +194,17 @@ fn tetgen_and_obj_files_load_as_assets() {
     assert_eq!(errors[0].body, bad);
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Added before the asset and mesh plugins, the loading registers once every plugin is in
+/// (`App::finish`, which `App::run` calls), and only once.
+#[test]
+fn the_asset_plugin_added_before_the_asset_plugin_registers_at_finish() {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, SoftBodyPlugins));
+    assert!(!app.world().contains_resource::<Assets<TetMeshAsset>>());
+    app.add_plugins((AssetPlugin::default(), MeshPlugin));
+    app.finish();
+    app.cleanup();
+    assert!(app.world().contains_resource::<Assets<TetMeshAsset>>());
+    app.update();
+}

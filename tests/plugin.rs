@@ -383,3 +383,41 @@ fn a_mesh_whose_tets_fold_is_reported_once_when_placed() {
     }
     assert_eq!(app.world().get::<SoftBodyStats>(folded).unwrap().steps, 10);
 }
+
+/// The plugin group, every feature on, fits a headless app (`MinimalPlugins`, as the README
+/// teaches for servers and tests): the parts that need assets or meshes stay out of an app that
+/// has none, and a jelly dropped at Earth gravity lands and keeps its volume.
+#[test]
+fn the_plugin_group_steps_a_jelly_headless() {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, SoftBodyPlugins))
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(
+            10,
+        )));
+    record_errors(&mut app);
+    app.update();
+    let mesh = Arc::new(box_grid(UVec3::splat(6), Vec3::splat(0.5 / 6.0), Vec3::ZERO).unwrap());
+    let body = app
+        .world_mut()
+        .spawn((
+            SoftBody::new(mesh, SoftBodyMaterial::JELLY).unwrap(),
+            Transform::from_xyz(-0.25, 0.3, -0.25),
+        ))
+        .id();
+    app.world_mut()
+        .spawn((StaticCollider::ground(0.8), Transform::default()));
+    let mut touched = 0;
+    for _ in 0..200 {
+        app.update();
+        touched += app.world().get::<SoftBodyStats>(body).unwrap().contacts;
+    }
+    let stats = app.world().get::<SoftBodyStats>(body).unwrap();
+    assert!(stats.steps >= 190, "{} steps in 2 s", stats.steps);
+    assert!(touched > 0, "the jelly never landed");
+    assert!(
+        stats.peak_volume_error_pct < 1.0,
+        "peak volume error {} %",
+        stats.peak_volume_error_pct
+    );
+    assert!(app.world().resource::<SeenErrors>().0.is_empty());
+}
