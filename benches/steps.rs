@@ -5,7 +5,9 @@
 use std::hint::black_box;
 
 use bevy::prelude::*;
-use bevy_soft_body::core::{ColliderInstance, RigidSphereState, SoftBodyState, VolumeMethod};
+use bevy_soft_body::core::{
+    ColliderInstance, RigidSphereState, Serial, SoftBodyState, VolumeMethod,
+};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::scenes::{PaperScene, headless_scene_app};
 use criterion::{BatchSize, Criterion, criterion_group, criterion_main};
@@ -64,7 +66,7 @@ fn steps(c: &mut Criterion) {
                 b.iter_batched(
                     || (state.clone(), spheres.clone()),
                     |(mut state, mut spheres)| {
-                        state.step_with_contacts(0.01, gravity, &mut spheres, &colliders);
+                        state.step_with_contacts(0.01, gravity, &mut spheres, &colliders, &Serial);
                         black_box(state)
                     },
                     BatchSize::LargeInput,

@@ -16,8 +16,8 @@ use parry3d::shape::SharedShape;
 
 use crate::components::{RigidSphere, SoftBody, StaticCollider};
 use crate::core::{
-    ColliderInstance, Resolution, RigidSphereState, SoftBodyMaterial, SoftBodyState, TetMesh,
-    VolumeMethod, box_grid, tetrahedralize, uv_sphere,
+    ColliderInstance, Resolution, RigidSphereState, Serial, SoftBodyMaterial, SoftBodyState,
+    TetMesh, VolumeMethod, box_grid, tetrahedralize, uv_sphere,
 };
 
 /// Earth's gravity, m/s^2.
@@ -546,7 +546,7 @@ impl GameWorld {
     /// One step of `h` seconds, as the plugin runs it for one body.
     pub fn step(&mut self, h: f32) {
         self.body
-            .step_with_contacts(h, self.gravity, &mut self.spheres, &self.colliders);
+            .step_with_contacts(h, self.gravity, &mut self.spheres, &self.colliders, &Serial);
     }
 
     /// The body's height (top minus bottom) over its rest height.

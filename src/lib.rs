@@ -47,22 +47,14 @@ pub use components::{
     SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
 #[cfg(feature = "render")]
-#[allow(deprecated)]
-pub use loading::SoftBodyAssetSet;
-#[cfg(feature = "render")]
 pub use loading::{
     ObjMeshLoader, SoftBodyAssetPlugin, SoftBodyAssetSystems, SoftBodyFromAsset, SoftBodySource,
     TetGenLoader, TetMeshAsset,
 };
-#[allow(deprecated)]
-pub use plugin::SoftBodySet;
 pub use plugin::{
     SoftBodyPlugin, SoftBodyStageTimes, SoftBodyStepTime, SoftBodySystems, SoftBodyThreads,
     SoftBodyTiming,
 };
-#[cfg(feature = "render")]
-#[allow(deprecated)]
-pub use surface::SoftBodySurfaceSet;
 #[cfg(feature = "render")]
 pub use surface::{SoftBodySurface, SoftBodySurfacePlugin, SoftBodySurfaceSystems, surface_mesh};
 

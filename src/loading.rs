@@ -186,13 +186,6 @@ impl SoftBodyFromAsset {
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SoftBodyAssetSystems;
 
-/// The old name of [`SoftBodyAssetSystems`].
-#[deprecated(
-    since = "0.2.0",
-    note = "renamed `SoftBodyAssetSystems` (Bevy's naming of system sets)"
-)]
-pub type SoftBodyAssetSet = SoftBodyAssetSystems;
-
 /// Registers [`TetMeshAsset`] with its loader (and, by default, [`ObjMeshLoader`]) and builds
 /// [`SoftBodyFromAsset`]s. Needs the asset and mesh plugins (part of `DefaultPlugins`) and
 /// [`crate::SoftBodyPlugin`].

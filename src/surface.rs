@@ -102,13 +102,6 @@ pub fn surface_mesh(surface: &crate::core::TriangleSurface) -> Mesh {
 #[derive(SystemSet, Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SoftBodySurfaceSystems;
 
-/// The old name of [`SoftBodySurfaceSystems`].
-#[deprecated(
-    since = "0.2.0",
-    note = "renamed `SoftBodySurfaceSystems` (Bevy's naming of system sets)"
-)]
-pub type SoftBodySurfaceSet = SoftBodySurfaceSystems;
-
 /// Updates every [`SoftBodySurface`]. Needs the mesh assets (Bevy's asset and mesh plugins,
 /// part of `DefaultPlugins`) and [`crate::SoftBodyPlugin`]. Added after the mesh plugin, its
 /// system is added in `build`; added before it, in `finish` (which `App::run` calls). An app

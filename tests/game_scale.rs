@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
-use bevy_soft_body::core::VolumeMethod;
+use bevy_soft_body::core::{Serial, VolumeMethod};
 use bevy_soft_body::game_scenes::{BundledMesh, GameScene, GameShape, MeshStyle};
 use bevy_soft_body::prelude::*;
 
@@ -407,11 +407,11 @@ fn slide_on_slope(
     let (h, gravity, down) = (1.0 / hz, Vec3::new(0.0, -9.81, 0.0), tilt * Vec3::X);
     let steps = hz as usize;
     for _ in 0..steps {
-        body.step_with_contacts(h, gravity, &mut [], &ground);
+        body.step_with_contacts(h, gravity, &mut [], &ground, &Serial);
     }
     let start = body.centre_of_mass();
     for _ in 0..2 * steps {
-        body.step_with_contacts(h, gravity, &mut [], &ground);
+        body.step_with_contacts(h, gravity, &mut [], &ground, &Serial);
     }
     (body.centre_of_mass() - start).dot(down)
 }

@@ -9,7 +9,8 @@ use std::cell::Cell;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
 use bevy_soft_body::core::{
-    ColliderInstance, RigidSphereState, SoftBodyMaterial, SoftBodyState, VolumeMethod, box_grid,
+    ColliderInstance, RigidSphereState, Serial, SoftBodyMaterial, SoftBodyState, VolumeMethod,
+    box_grid,
 };
 use glam::{UVec3, Vec3};
 use parry3d::math::Pose;
@@ -89,11 +90,23 @@ fn steps_allocate_nothing_after_the_first() {
             Pose::from_parts(Vec3::new(0.0, -0.05, 0.0), glam::Quat::IDENTITY),
             0.8,
         )];
-        body.step_with_contacts(0.01, Vec3::new(0.0, -9.81, 0.0), &mut spheres, &colliders);
+        body.step_with_contacts(
+            0.01,
+            Vec3::new(0.0, -9.81, 0.0),
+            &mut spheres,
+            &colliders,
+            &Serial,
+        );
         ALLOCATIONS.store(0, Ordering::Relaxed);
         COUNTING.with(|c| c.set(true));
         for _ in 0..50 {
-            body.step_with_contacts(0.01, Vec3::new(0.0, -9.81, 0.0), &mut spheres, &colliders);
+            body.step_with_contacts(
+                0.01,
+                Vec3::new(0.0, -9.81, 0.0),
+                &mut spheres,
+                &colliders,
+                &Serial,
+            );
         }
         COUNTING.with(|c| c.set(false));
         let contacts = body.contacts().count();

@@ -14,7 +14,7 @@ use super::geometry::signed_volume;
 use super::impulses::{DriftTracking, PassWorker, SafeRadii, StepCounters};
 use super::lanes::Point4;
 use super::material::{Elasticity, MaterialError, SoftBodyMaterial};
-use super::parallel::{BlockFlags, Parallel, Serial, SharedSlice};
+use super::parallel::{BlockFlags, Parallel, SharedSlice};
 use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
 use super::sleep::{Sleep, SleepSettings};
 use super::soft_records::SubstepPlan;
@@ -510,13 +510,10 @@ impl SoftBodyState {
     /// explicit baseline gets there) keeps its position, loses its velocity and is counted, so
     /// that one bad particle cannot turn the body, the spheres it touches and the game's
     /// transforms into NaN. Then a body that runs away is caught and put back (`runaway.rs`).
-    pub fn integrate_positions(&mut self, h: f32) {
-        self.integrate_positions_on(h, &Serial);
-    }
-
-    /// [`SoftBodyState::integrate_positions`] with the particles in chunks run by `parallel`
-    /// (each particle on its own: the same result on any number of threads).
-    pub fn integrate_positions_on(&mut self, h: f32, parallel: &dyn Parallel) {
+    ///
+    /// The particles are run in chunks by `parallel` (each particle on its own: the same
+    /// result on any number of threads).
+    pub fn integrate_positions(&mut self, h: f32, parallel: &dyn Parallel) {
         if self.material.is_substepped() {
             // `shape_pass` moved the particles through its substeps already.
             self.catch_runaway();
@@ -758,6 +755,7 @@ impl SoftBodyState {
 
 #[cfg(test)]
 mod tests {
+    use crate::core::Serial;
     use std::sync::Arc;
 
     use glam::Vec3;
@@ -805,7 +803,7 @@ mod tests {
             let momentum = body.linear_momentum();
             let mut last_energy = f32::INFINITY;
             for _ in 0..50 {
-                body.apply_forces(0.01, Vec3::ZERO);
+                body.apply_forces(0.01, Vec3::ZERO, &Serial);
                 let energy: f32 = body
                     .velocities()
                     .iter()

@@ -38,7 +38,7 @@ use super::chunks::in_particle_chunks;
 use super::colliders::{
     ColliderInstance, RigidContacts, RigidSphereState, combined_friction, friction_change,
 };
-use super::parallel::{Parallel, Serial, SharedSlice};
+use super::parallel::{Parallel, SharedSlice};
 
 /// Two static colliders a particle touches at once count as two contacts (the volume impulses
 /// may push into neither) when the cosine between their normals is below this; nearly parallel
@@ -82,15 +82,12 @@ fn static_friction(
 
 impl SoftBodyState {
     /// Pushes predicted positions out of static colliders. Returns the number of contacts.
-    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
-        self.resolve_static_contacts_on(h, colliders, &Serial)
-    }
-
-    /// [`SoftBodyState::resolve_static_contacts`] with the particles in chunks run by
-    /// `parallel`: each particle's contacts depend on that particle alone, and the particles
+    ///
+    /// The particles are run in chunks by `parallel`: each particle's contacts depend on that
+    /// particle alone, and the particles
     /// newly in contact are listed in index order as one after another would, so the result
     /// is the same on any number of threads.
-    pub fn resolve_static_contacts_on(
+    pub fn resolve_static_contacts(
         &mut self,
         h: f32,
         colliders: &[ColliderInstance],
@@ -373,6 +370,7 @@ impl SoftBodyState {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::core::Serial;
     use crate::core::colliders::{CollisionFilter, RigidBodyMotion, RigidCollider};
     use crate::core::material::SoftBodyMaterial;
     use crate::core::parallel::Threads;
@@ -403,7 +401,7 @@ mod tests {
             let g = Vec3::new(0.0, -9.81, 0.0);
             let mut settled = Vec3::ZERO;
             for step in 0..600 {
-                body.step_with_contacts(1.0 / 60.0, g, &mut [], &ground);
+                body.step_with_contacts(1.0 / 60.0, g, &mut [], &ground, &Serial);
                 if step == 119 {
                     settled = body.centre_of_mass();
                 }
@@ -430,7 +428,7 @@ mod tests {
         let g = Vec3::new(0.0, -9.81, 0.0);
         let mut fastest = 0.0f32;
         for step in 0..120 {
-            body.step_with_contacts(1.0 / 60.0, g, &mut [], &colliders);
+            body.step_with_contacts(1.0 / 60.0, g, &mut [], &colliders, &Serial);
             if step < 30 {
                 continue;
             }
@@ -501,12 +499,12 @@ mod tests {
                     let k = (i * 7 + step * 3) % 11;
                     *v = Vec3::new(k as f32 - 5.0, 3.0 - k as f32, 0.5 * k as f32 - 2.0);
                 }
-                contacts.push(body.resolve_static_contacts_on(0.01, &colliders, parallel));
+                contacts.push(body.resolve_static_contacts(0.01, &colliders, parallel));
                 // Listed in index order, as one particle after another finds them.
                 let listed: Vec<usize> = body.contacts().map(|(i, _)| i).collect();
                 assert!(listed.is_sorted(), "{listed:?}");
-                contacts.push(body.resolve_static_contacts_on(0.01, &colliders, parallel));
-                body.integrate_positions_on(0.01, parallel);
+                contacts.push(body.resolve_static_contacts(0.01, &colliders, parallel));
+                body.integrate_positions(0.01, parallel);
             }
             let touching: Vec<(usize, Vec3)> = body.contacts().collect();
             (

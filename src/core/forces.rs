@@ -8,7 +8,7 @@ use glam::Vec3;
 use super::body::SoftBodyState;
 use super::geometry::{signed_volume, volume_gradients};
 use super::material::{Elasticity, VolumeMethod};
-use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
+use super::parallel::{Parallel, Phase, SharedSlice, run_phases};
 
 impl SoftBodyState {
     /// The dampers of all springs, in index order, which is the blocks' (see [`damp_spring`]).
@@ -30,15 +30,12 @@ impl SoftBodyState {
     }
 
     /// Stage 1: external, spring and (baseline) volume forces change the velocities.
-    pub fn apply_forces(&mut self, h: f32, gravity: Vec3) {
-        self.apply_forces_on(h, gravity, &Serial);
-    }
-
-    /// [`SoftBodyState::apply_forces`] with the mesh's blocks run by `parallel`: the same
-    /// result bit for bit on any number of threads (see `core::parallel`). Springs (and the
+    ///
+    /// The mesh's blocks are run by `parallel`: the same result bit for bit on any number of
+    /// threads (see `core::parallel`). Springs (and the
     /// baseline's tets) add their forces block by block in the blocks' order, then each
     /// particle's velocity takes its force, then the dampers act block by block, then drag.
-    pub fn apply_forces_on(&mut self, h: f32, gravity: Vec3, parallel: &dyn Parallel) {
+    pub fn apply_forces(&mut self, h: f32, gravity: Vec3, parallel: &dyn Parallel) {
         self.gravity = gravity;
         if self.material.is_substepped() {
             // Gravity, springs, damping and drag act inside the substeps (`shape_pass`); only
@@ -220,5 +217,5 @@ fn damp_spring(
     velocities.set(j, velocities.get(j) - dir * (impulse * inv_masses[j]));
 }
 
-/// Particles per job of the per-particle parts of [`SoftBodyState::apply_forces_on`].
+/// Particles per job of the per-particle parts of [`SoftBodyState::apply_forces`].
 const PARTICLE_CHUNK: usize = 1024;

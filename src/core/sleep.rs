@@ -211,7 +211,7 @@ mod tests {
     use parry3d::shape::SharedShape;
 
     use super::*;
-    use crate::core::{SoftBodyMaterial, SoftBodyState, box_grid};
+    use crate::core::{Serial, SoftBodyMaterial, SoftBodyState, box_grid};
 
     fn ground() -> ColliderInstance {
         ColliderInstance::new(SharedShape::halfspace(Vec3::Y), Pose::IDENTITY, 0.8)
@@ -226,7 +226,7 @@ mod tests {
     ) -> Option<u32> {
         let g = Vec3::new(0.0, -9.81, 0.0);
         for step in 0..(seconds * 60.0) as u32 {
-            body.step_with_contacts(1.0 / 60.0, g, &mut [], colliders);
+            body.step_with_contacts(1.0 / 60.0, g, &mut [], colliders, &Serial);
             if body.is_sleeping() {
                 return Some(step);
             }
@@ -252,7 +252,13 @@ mod tests {
         );
         let before = body.positions().to_vec();
         for _ in 0..60 {
-            body.step_with_contacts(1.0 / 60.0, Vec3::new(0.0, -9.81, 0.0), &mut [], &colliders);
+            body.step_with_contacts(
+                1.0 / 60.0,
+                Vec3::new(0.0, -9.81, 0.0),
+                &mut [],
+                &colliders,
+                &Serial,
+            );
         }
         assert!(body.is_sleeping());
         assert_eq!(body.positions(), &before[..]);
@@ -271,13 +277,19 @@ mod tests {
         // Gravity turned sideways.
         let mut body = jelly();
         settle(&mut body, 10.0, &colliders).expect("asleep");
-        body.step_with_contacts(1.0 / 60.0, Vec3::new(3.0, -9.81, 0.0), &mut [], &colliders);
+        body.step_with_contacts(
+            1.0 / 60.0,
+            Vec3::new(3.0, -9.81, 0.0),
+            &mut [],
+            &colliders,
+            &Serial,
+        );
         assert!(!body.is_sleeping());
         // The ground taken away: it falls.
         let mut body = jelly();
         settle(&mut body, 10.0, &colliders).expect("asleep");
         let y = body.centre_of_mass().y;
-        body.step_with_contacts(1.0 / 60.0, g, &mut [], &[]);
+        body.step_with_contacts(1.0 / 60.0, g, &mut [], &[], &Serial);
         assert!(!body.is_sleeping());
         assert!(body.centre_of_mass().y < y);
         // A sphere dropped on it.
@@ -290,14 +302,14 @@ mod tests {
             inv_mass: 1.0,
             friction: 0.5,
         }];
-        body.step_with_contacts(1.0 / 60.0, g, &mut sphere, &colliders);
+        body.step_with_contacts(1.0 / 60.0, g, &mut sphere, &colliders, &Serial);
         assert!(!body.is_sleeping());
         // A pinned particle moved by the game.
         let mut body = jelly();
         settle(&mut body, 10.0, &colliders).expect("asleep");
         let target = body.positions()[0] + Vec3::Y * 0.1;
         body.set_kinematic(0, target).unwrap();
-        body.step_with_contacts(1.0 / 60.0, g, &mut [], &colliders);
+        body.step_with_contacts(1.0 / 60.0, g, &mut [], &colliders, &Serial);
         assert!(!body.is_sleeping());
     }
 

@@ -80,7 +80,7 @@ impl SoftBodyState {
     ) -> u32 {
         match stage {
             Stage::Forces => {
-                self.apply_forces_on(h, gravity, parallel);
+                self.apply_forces(h, gravity, parallel);
                 0
             }
             Stage::Contacts => {
@@ -88,11 +88,11 @@ impl SoftBodyState {
                 contacts + self.shape_pass(h, spheres, colliders, parallel)
             }
             Stage::OneRing => {
-                self.one_ring_pass_on(h, spheres, parallel);
+                self.one_ring_pass(h, spheres, parallel);
                 0
             }
             Stage::PerTet => {
-                self.per_tet_pass_on(h, spheres, parallel);
+                self.per_tet_pass(h, spheres, parallel);
                 0
             }
             Stage::Plasticity => {
@@ -101,7 +101,7 @@ impl SoftBodyState {
             }
             Stage::Integrate => {
                 let contacts = self.resolve_contacts_on(h, spheres, colliders, parallel);
-                self.integrate_positions_on(h, parallel);
+                self.integrate_positions(h, parallel);
                 contacts
             }
         }
@@ -123,30 +123,21 @@ impl SoftBodyState {
         }
         self.resolve_sphere_contacts(h, spheres)
             + self.resolve_rigid_contacts(h, 0.0)
-            + self.resolve_static_contacts_on(h, colliders, parallel)
+            + self.resolve_static_contacts(h, colliders, parallel)
     }
 
     /// A whole step without colliders or spheres: for tests and benchmarks of the core.
     pub fn step_free(&mut self, h: f32, gravity: Vec3) {
-        self.step_with_contacts(h, gravity, &mut [], &[]);
+        self.step_with_contacts(h, gravity, &mut [], &[], &Serial);
     }
 
     /// A whole step of this body among `spheres` and `colliders`, exactly as the plugin runs it
     /// for one body: for using the core without Bevy, and for benchmarks of what the plugin
     /// does per body.
-    pub fn step_with_contacts(
-        &mut self,
-        h: f32,
-        gravity: Vec3,
-        spheres: &mut [RigidSphereState],
-        colliders: &[ColliderInstance],
-    ) {
-        self.step_with_contacts_on(h, gravity, spheres, colliders, &Serial);
-    }
-
-    /// [`SoftBodyState::step_with_contacts`] with the body's blocks run by `parallel`: the same
+    ///
+    /// The body's blocks are run by `parallel` (`Serial`, or the plugin's threads): the same
     /// result bit for bit on any number of threads.
-    pub fn step_with_contacts_on(
+    pub fn step_with_contacts(
         &mut self,
         h: f32,
         gravity: Vec3,

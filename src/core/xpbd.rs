@@ -34,7 +34,7 @@ use super::deviatoric::{project_tet_shapes, refresh_shape_bundles};
 use super::geometry::{signed_volume, volume_gradients};
 use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};
-use super::parallel::Parallel;
+use super::parallel::{Parallel, Serial};
 use super::soft_records::SubstepPlan;
 
 impl SoftBodyState {
@@ -276,7 +276,7 @@ impl SoftBodyState {
             s.position = start;
         }
         contacts += self.resolve_rigid_contacts(hs, k as f32 * hs);
-        contacts + self.resolve_static_contacts(hs, colliders)
+        contacts + self.resolve_static_contacts(hs, colliders, &Serial)
     }
 
     /// The end of a substep: damping, then the paper's volume impulses and `x += h_s v` (or,

@@ -35,13 +35,6 @@ use threads::*;
 pub use threads::{PARALLEL_PASS_MIN_TETS, SoftBodyThreads};
 pub use timing::{SoftBodyStageTimes, SoftBodyStepTime};
 
-/// The old name of [`SoftBodySystems`].
-#[deprecated(
-    since = "0.2.0",
-    note = "renamed `SoftBodySystems` (Bevy's naming of system sets)"
-)]
-pub type SoftBodySet = SoftBodySystems;
-
 /// The plugin's system sets, chained in this order: preparing, the stages of a step in the
 /// core's order ([`Stage::ORDER`]; see `core::step` for what each does and why in this order),
 /// writing back. A game puts its own systems between them.

@@ -40,7 +40,7 @@ use super::geometry::{
 };
 use super::lanes::{LANES, Point4, Vec3x4};
 use super::material::{ImpulseSettings, VolumeMethod};
-use super::parallel::{Parallel, Phase, Serial, SharedSlice, run_phases};
+use super::parallel::{Parallel, Phase, SharedSlice, run_phases};
 use super::roots::{Cubic, clear_of_zero, first_crossing, monotone_root};
 use super::tet_mesh::{Csr, TetMesh};
 

@@ -11,13 +11,10 @@ impl SoftBodyState {
     /// Does nothing for the baseline or when the one-ring switch is off.
     /// `spheres` are the rigid spheres of the last contact pass, in the same order: particles
     /// pressed against one move it along.
-    pub fn one_ring_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
-        self.one_ring_pass_on(h, spheres, &Serial);
-    }
-
-    /// [`SoftBodyState::one_ring_pass`] with the mesh's blocks run by `parallel`: the same
-    /// result bit for bit on any number of threads (see `core::parallel`).
-    pub fn one_ring_pass_on(
+    ///
+    /// The mesh's blocks are run by `parallel`: the same result bit for bit on any number of
+    /// threads (see `core::parallel`).
+    pub fn one_ring_pass(
         &mut self,
         h: f32,
         spheres: &mut [RigidSphereState],
@@ -68,13 +65,9 @@ impl SoftBodyState {
     /// Stage 4: one impulse per tet towards its own rest volume, scaled by `gamma` (section 4,
     /// end of section 5). Does nothing for the baseline or when the per-tet switch is off.
     /// `spheres` as for [`SoftBodyState::one_ring_pass`].
-    pub fn per_tet_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
-        self.per_tet_pass_on(h, spheres, &Serial);
-    }
-
-    /// [`SoftBodyState::per_tet_pass`] with the mesh's blocks run by `parallel`, as
-    /// [`SoftBodyState::one_ring_pass_on`].
-    pub fn per_tet_pass_on(
+    ///
+    /// The mesh's blocks are run by `parallel`, as in [`SoftBodyState::one_ring_pass`].
+    pub fn per_tet_pass(
         &mut self,
         h: f32,
         spheres: &mut [RigidSphereState],
