@@ -24,6 +24,11 @@
 //! ```
 #![warn(missing_docs)]
 
+/// The README's code, compiled (and, where it can run headless, run) by `cargo test`.
+#[cfg(all(doctest, feature = "render", feature = "avian"))]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;
+
 #[cfg(feature = "avian")]
 pub mod avian;
 pub mod components;
