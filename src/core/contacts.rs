@@ -25,7 +25,7 @@
 //! Friction against a static collider holds a particle where it stands, not only its velocity
 //! (see `static_friction`): with velocity-only friction the volume impulses' small pushes at
 //! a resting body's base, each stopped by friction only while it pressed into the ground, made
-//! the body walk across the ground and never come to rest (PERFORMANCE.md, stop 30). Against a
+//! the body walk across the ground and never come to rest (PERFORMANCE.md). Against a
 //! sphere, friction is Coulomb's on the relative velocity. The ground's push that the volume
 //! impulses meet (their pushes into it that `constrain_direction` takes out) is a normal force
 //! too, and gets its friction after them (`support_friction`).
@@ -380,7 +380,7 @@ mod tests {
 
     /// A rubber cube (1 MPa, 0.5 m) and a jelly cube resting on the ground at 60 Hz stay where
     /// they are: with velocity-only friction the rubber cube crept along, pushed by its own
-    /// volume impulses (PERFORMANCE.md, stop 30). On ice (no friction) nothing pushes it
+    /// volume impulses (PERFORMANCE.md). On ice (no friction) nothing pushes it
     /// either: the impulses conserve momentum.
     #[test]
     fn a_resting_body_does_not_walk_across_the_ground() {

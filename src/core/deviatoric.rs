@@ -20,12 +20,12 @@
 //! The tets are projected four at a time in SIMD lanes (`ShapeBundle`: four tets that share
 //! no vertex, the same result as one after another), in bundles taken in index order: a sweep
 //! in index order carries a correction across the mesh in one pass, which the volume passes'
-//! blocks' order does not (PERFORMANCE.md, stop 32).
+//! blocks' order does not (PERFORMANCE.md).
 //!
 //! Why not the edges: a spring network has a Poisson's ratio of 1/4, so under a load the
 //! edges pull the volume towards their own equilibrium, every substep, against the impulses,
-//! and on an irregular mesh their stiffness is as irregular as the mesh (PERFORMANCE.md,
-//! stop 32). The deviatoric stress is traceless:
+//! and on an irregular mesh their stiffness is as irregular as the mesh (PERFORMANCE.md).
+//! The deviatoric stress is traceless:
 //! it does no work on a change of volume, so it leaves the volume where the impulses put it
 //! (its projection, weighted by the corners' masses, still moves a tet's volume a little); the
 //! hydrostatic one pulls only towards the rest volume.

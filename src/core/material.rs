@@ -174,7 +174,7 @@ pub struct ElasticSettings {
     /// 0.49 to 0.5; the default is 0.499. With one projection per substep the shape solve
     /// alone still loses a few percent on a landing, which the volume impulses take under
     /// their tolerance; the lower the value, the more of a landing's crush is left to them
-    /// (PERFORMANCE.md, stop 32).
+    /// (PERFORMANCE.md).
     pub poisson_ratio: f32,
     /// Stiffness-proportional damping `beta`, in seconds: the damping is `beta` times the
     /// stiffness, so a mode of angular frequency `w` has the damping ratio `beta w / 2` (fast,

@@ -8,7 +8,7 @@
 //! positions stay as they are. The test is on positions, not on the particles' velocities: a
 //! resting body under the paper's impulses keeps small velocities that come and go (each
 //! substep's volume correction against the edges' sag) while its particles stay within a
-//! fraction of a millimetre (PERFORMANCE.md, stop 30). It wakes when a step finds it disturbed:
+//! fraction of a millimetre (PERFORMANCE.md). It wakes when a step finds it disturbed:
 //! gravity changed, a kinematic particle asked to move, a rigid sphere within reach of its
 //! bounds, a collider near it moved, appeared or went away; or when the game touches it
 //! (`SoftBodyState::velocities_mut`, `translate`, `map_positions`, `set_material`,

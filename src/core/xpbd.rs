@@ -17,7 +17,7 @@
 //! a constraint is `gamma = beta / h_s`, the same for every constraint, and the projection
 //! solves the constraint and its damper together, implicitly. A separate pass of velocity
 //! dampers after the projection (what the paper's explicit springs keep) is unstable for stiff
-//! materials (PERFORMANCE.md, stop 31).
+//! materials (PERFORMANCE.md).
 //!
 //! Decisions: gravity is applied per substep (stored by `apply_forces`, which adds no spring
 //! forces for this method); kinematic particles move to their target in equal parts; a rigid

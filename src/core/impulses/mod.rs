@@ -22,8 +22,8 @@
 //! - All directions zero (ring at rest volume, or all its particles kinematic): skipped.
 //! - A tet touched by an impulse that is already below `eps = V0 / 2` may lose at most
 //!   [`CLAMP_SLACK`] of its rest volume per impulse. Forbidding it to shrink at all (the first
-//!   rule tried) froze every impulse near a crushed region, including those that re-inflate it:
-//!   under a heavy sphere the soft cube then lost 38 % of its volume instead of under 2 %.
+//!   rule tried) froze every impulse near a crushed region, including those that re-inflate it,
+//!   and a soft cube under a heavy sphere lost much of its volume (PERFORMANCE.md).
 //! - The per-tet correction is clamped at the step actually applied (`gamma * s*`), not at
 //!   `s*`: only what is applied can harm a neighbour.
 //!
@@ -148,7 +148,7 @@ pub const CLAMP_FRACTION: f32 = 0.5;
 /// frozen (at `eps` a tet may lose nothing) or given a crushed tet's [`CLAMP_SLACK`] (the
 /// reference passes, `reference.rs`, found it in the jelly cube's landing). Counted as below,
 /// as crushed as the clamp lets a tet be, it keeps the slack, which lets the impulses that
-/// re-inflate it go on (PERFORMANCE.md, stop 33).
+/// re-inflate it go on (PERFORMANCE.md).
 pub const CLAMP_ROUNDING: f32 = 1e-4;
 
 /// The least volume the neighbour clamp lets a tet of rest volume `v0`, now of `volume`, reach:
