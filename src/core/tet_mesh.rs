@@ -130,141 +130,22 @@ impl TetMesh {
         if tets.is_empty() {
             return Err(TetMeshError::NoTets);
         }
-        if positions.len() > u32::MAX as usize {
-            return Err(TetMeshError::TooManyVertices(positions.len()));
-        }
-        if let Some((vertex, &position)) =
-            positions.iter().enumerate().find(|(_, p)| !p.is_finite())
-        {
-            return Err(TetMeshError::NonFiniteVertex { vertex, position });
-        }
+        check_vertices(&positions)?;
         let n = positions.len();
-        let mut rest_volumes = Vec::with_capacity(tets.len());
-        let mut slivers = Vec::with_capacity(tets.len());
-        let mut reoriented_tets = 0;
-        let mut used = vec![false; n];
-        for (t, tet) in tets.iter_mut().enumerate() {
-            for (k, &i) in tet.iter().enumerate() {
-                if i as usize >= n {
-                    return Err(TetMeshError::IndexOutOfRange {
-                        tet: t,
-                        index: i,
-                        vertex_count: n,
-                    });
-                }
-                if tet[..k].contains(&i) {
-                    return Err(TetMeshError::RepeatedVertex { tet: t, vertex: i });
-                }
-                used[i as usize] = true;
-            }
-            let p = tet.map(|i| positions[i as usize]);
-            let mut volume = signed_volume(&p);
-            let longest_edge = (0..4)
-                .flat_map(|a| (a + 1..4).map(move |b| (a, b)))
-                .map(|(a, b)| p[a].distance(p[b]))
-                .fold(0.0f32, f32::max);
-            // Written so that a NaN volume (impossible for finite input) also counts as degenerate.
-            if volume
-                .abs()
-                .partial_cmp(&(DEGENERATE_RATIO * longest_edge.powi(3)))
-                != Some(std::cmp::Ordering::Greater)
-            {
-                return Err(TetMeshError::DegenerateTet {
-                    tet: t,
-                    volume,
-                    longest_edge,
-                });
-            }
-            if volume < 0.0 {
-                tet.swap(1, 2);
-                volume = -volume;
-                reoriented_tets += 1;
-            }
-            rest_volumes.push(volume);
-            slivers.push(volume < SLIVER_RATIO * longest_edge.powi(3));
-        }
-        if let Some(vertex) = used.iter().position(|&u| !u) {
-            return Err(TetMeshError::UnreferencedVertex { vertex });
-        }
-
-        // Edges: every vertex pair of every tet, once.
-        let mut edges: Vec<[u32; 2]> = tets
-            .iter()
-            .flat_map(|t| {
-                [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)].map(|(a, b)| {
-                    let (i, j) = (t[a], t[b]);
-                    [i.min(j), i.max(j)]
-                })
-            })
-            .collect();
-        edges.sort_unstable();
-        edges.dedup();
-
+        let RestTets {
+            rest_volumes,
+            slivers,
+            reoriented_tets,
+        } = rest_tets(&positions, &mut tets)?;
+        let edges = unique_edges(&tets);
         let pairs: Vec<(u32, u32)> = tets
             .iter()
             .enumerate()
             .flat_map(|(t, tet)| tet.map(|i| (i, t as u32)))
             .collect();
         let one_rings = Csr::from_pairs(n, &pairs);
-
-        // Ring vertices (all vertices of the ring's tets, the centre first) and the tets that
-        // touch the ring from outside, which the neighbour clamp must also watch.
-        let mut stamp_v = vec![u32::MAX; n];
-        let mut stamp_t = vec![u32::MAX; tets.len()];
-        let mut ring_pairs = Vec::new();
-        let mut border_pairs = Vec::new();
-        for p in 0..n {
-            let key = p as u32;
-            let start = ring_pairs.len();
-            stamp_v[p] = key;
-            ring_pairs.push((key, key));
-            for &t in one_rings.row(p) {
-                stamp_t[t as usize] = key;
-                for &i in &tets[t as usize] {
-                    if stamp_v[i as usize] != key {
-                        stamp_v[i as usize] = key;
-                        ring_pairs.push((key, i));
-                    }
-                }
-            }
-            for &(_, i) in &ring_pairs[start..] {
-                for &t in one_rings.row(i as usize) {
-                    if stamp_t[t as usize] != key {
-                        stamp_t[t as usize] = key;
-                        border_pairs.push((key, t));
-                    }
-                }
-            }
-        }
-        let ring_vertices = Csr::from_pairs(n, &ring_pairs);
-        let ring_border_tets = Csr::from_pairs(n, &border_pairs);
-        let mut local = vec![0u16; n];
-        let mut ring_corners = Vec::with_capacity(4 * tets.len());
-        for p in 0..n {
-            let row = ring_vertices.row(p);
-            if row.len() > u16::MAX as usize + 1 {
-                return Err(TetMeshError::RingTooLarge {
-                    vertex: p,
-                    ring_vertices: row.len(),
-                });
-            }
-            for (k, &i) in row.iter().enumerate() {
-                local[i as usize] = k as u16;
-            }
-            for &t in one_rings.row(p) {
-                let [a, b, c, d] = tets[t as usize].map(|i| local[i as usize]);
-                // The centre (local 0) last, by an even permutation (the same orientation).
-                ring_corners.push(if a == 0 {
-                    [d, c, b, a]
-                } else if b == 0 {
-                    [c, d, a, b]
-                } else if c == 0 {
-                    [b, a, d, c]
-                } else {
-                    [a, b, c, d]
-                });
-            }
-        }
+        let (ring_vertices, ring_border_tets) = ring_vertices_and_borders(&tets, &one_rings);
+        let ring_corners = ring_corners(&tets, &one_rings, &ring_vertices)?;
 
         let ring_slivers: Vec<bool> = (0..n)
             .map(|p| one_rings.row(p).iter().any(|&t| slivers[t as usize]))
@@ -291,23 +172,7 @@ impl TetMesh {
                     .fold(0.0f64, |sum, &t| sum + rest_volumes[t as usize] as f64)
             })
             .collect();
-
-        // Tets sharing at least one vertex with each tet.
-        let mut stamp_t = vec![u32::MAX; tets.len()];
-        let mut neighbour_pairs = Vec::new();
-        for (t, tet) in tets.iter().enumerate() {
-            let key = t as u32;
-            stamp_t[t] = key;
-            for &i in tet {
-                for &u in one_rings.row(i as usize) {
-                    if stamp_t[u as usize] != key {
-                        stamp_t[u as usize] = key;
-                        neighbour_pairs.push((key, u));
-                    }
-                }
-            }
-        }
-        let tet_neighbours = Csr::from_pairs(tets.len(), &neighbour_pairs);
+        let tet_neighbours = tet_neighbours(&tets, &one_rings);
         let mut blocks = Blocks::new(&positions, &tets, &rest_volumes, &edges, &ring_vertices);
         // The springs numbered in the blocks' order, so that the passes over them (forces,
         // dampers, XPBD's edges) read every per-spring array front to back instead of jumping
@@ -573,6 +438,193 @@ impl ParticleRegion {
             }
         }
     }
+}
+
+/// Checks the vertices: not too many to index, all finite.
+fn check_vertices(positions: &[Vec3]) -> Result<(), TetMeshError> {
+    if positions.len() > u32::MAX as usize {
+        return Err(TetMeshError::TooManyVertices(positions.len()));
+    }
+    if let Some((vertex, &position)) = positions.iter().enumerate().find(|(_, p)| !p.is_finite()) {
+        return Err(TetMeshError::NonFiniteVertex { vertex, position });
+    }
+    Ok(())
+}
+
+/// What checking the tets finds: their rest volumes, which are slivers, how many were turned.
+struct RestTets {
+    rest_volumes: Vec<f32>,
+    slivers: Vec<bool>,
+    reoriented_tets: usize,
+}
+
+/// Checks every tet (indices in range, four distinct vertices, not degenerate), turns those
+/// given with negative orientation, and checks that every vertex is in a tet.
+fn rest_tets(positions: &[Vec3], tets: &mut [[u32; 4]]) -> Result<RestTets, TetMeshError> {
+    let n = positions.len();
+    let mut rest_volumes = Vec::with_capacity(tets.len());
+    let mut slivers = Vec::with_capacity(tets.len());
+    let mut reoriented_tets = 0;
+    let mut used = vec![false; n];
+    for (t, tet) in tets.iter_mut().enumerate() {
+        for (k, &i) in tet.iter().enumerate() {
+            if i as usize >= n {
+                return Err(TetMeshError::IndexOutOfRange {
+                    tet: t,
+                    index: i,
+                    vertex_count: n,
+                });
+            }
+            if tet[..k].contains(&i) {
+                return Err(TetMeshError::RepeatedVertex { tet: t, vertex: i });
+            }
+            used[i as usize] = true;
+        }
+        let p = tet.map(|i| positions[i as usize]);
+        let mut volume = signed_volume(&p);
+        let longest_edge = (0..4)
+            .flat_map(|a| (a + 1..4).map(move |b| (a, b)))
+            .map(|(a, b)| p[a].distance(p[b]))
+            .fold(0.0f32, f32::max);
+        // Written so that a NaN volume (impossible for finite input) also counts as degenerate.
+        if volume
+            .abs()
+            .partial_cmp(&(DEGENERATE_RATIO * longest_edge.powi(3)))
+            != Some(std::cmp::Ordering::Greater)
+        {
+            return Err(TetMeshError::DegenerateTet {
+                tet: t,
+                volume,
+                longest_edge,
+            });
+        }
+        if volume < 0.0 {
+            tet.swap(1, 2);
+            volume = -volume;
+            reoriented_tets += 1;
+        }
+        rest_volumes.push(volume);
+        slivers.push(volume < SLIVER_RATIO * longest_edge.powi(3));
+    }
+    if let Some(vertex) = used.iter().position(|&u| !u) {
+        return Err(TetMeshError::UnreferencedVertex { vertex });
+    }
+
+    Ok(RestTets {
+        rest_volumes,
+        slivers,
+        reoriented_tets,
+    })
+}
+
+/// Every vertex pair of every tet, once, sorted.
+fn unique_edges(tets: &[[u32; 4]]) -> Vec<[u32; 2]> {
+    let mut edges: Vec<[u32; 2]> = tets
+        .iter()
+        .flat_map(|t| {
+            [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)].map(|(a, b)| {
+                let (i, j) = (t[a], t[b]);
+                [i.min(j), i.max(j)]
+            })
+        })
+        .collect();
+    edges.sort_unstable();
+    edges.dedup();
+    edges
+}
+
+/// Per vertex, its ring's vertices (all vertices of the ring's tets, the centre first) and the
+/// tets that touch the ring from outside, which the neighbour clamp must also watch.
+fn ring_vertices_and_borders(tets: &[[u32; 4]], one_rings: &Csr) -> (Csr, Csr) {
+    let n = one_rings.len();
+    let mut stamp_v = vec![u32::MAX; n];
+    let mut stamp_t = vec![u32::MAX; tets.len()];
+    let mut ring_pairs = Vec::new();
+    let mut border_pairs = Vec::new();
+    for p in 0..n {
+        let key = p as u32;
+        let start = ring_pairs.len();
+        stamp_v[p] = key;
+        ring_pairs.push((key, key));
+        for &t in one_rings.row(p) {
+            stamp_t[t as usize] = key;
+            for &i in &tets[t as usize] {
+                if stamp_v[i as usize] != key {
+                    stamp_v[i as usize] = key;
+                    ring_pairs.push((key, i));
+                }
+            }
+        }
+        for &(_, i) in &ring_pairs[start..] {
+            for &t in one_rings.row(i as usize) {
+                if stamp_t[t as usize] != key {
+                    stamp_t[t as usize] = key;
+                    border_pairs.push((key, t));
+                }
+            }
+        }
+    }
+    (
+        Csr::from_pairs(n, &ring_pairs),
+        Csr::from_pairs(n, &border_pairs),
+    )
+}
+
+/// Each ring's tets as corners in the ring's own vertex numbering (`ring_vertices`), the centre
+/// last; an error if a ring has more vertices than that numbering holds.
+fn ring_corners(
+    tets: &[[u32; 4]],
+    one_rings: &Csr,
+    ring_vertices: &Csr,
+) -> Result<Vec<[u16; 4]>, TetMeshError> {
+    let n = one_rings.len();
+    let mut local = vec![0u16; n];
+    let mut ring_corners = Vec::with_capacity(4 * tets.len());
+    for p in 0..n {
+        let row = ring_vertices.row(p);
+        if row.len() > u16::MAX as usize + 1 {
+            return Err(TetMeshError::RingTooLarge {
+                vertex: p,
+                ring_vertices: row.len(),
+            });
+        }
+        for (k, &i) in row.iter().enumerate() {
+            local[i as usize] = k as u16;
+        }
+        for &t in one_rings.row(p) {
+            let [a, b, c, d] = tets[t as usize].map(|i| local[i as usize]);
+            // The centre (local 0) last, by an even permutation (the same orientation).
+            ring_corners.push(if a == 0 {
+                [d, c, b, a]
+            } else if b == 0 {
+                [c, d, a, b]
+            } else if c == 0 {
+                [b, a, d, c]
+            } else {
+                [a, b, c, d]
+            });
+        }
+    }
+    Ok(ring_corners)
+}
+
+/// Per tet, the tets that share at least one vertex with it.
+fn tet_neighbours(tets: &[[u32; 4]], one_rings: &Csr) -> Csr {
+    let mut stamp_t = vec![u32::MAX; tets.len()];
+    let mut neighbour_pairs = Vec::new();
+    for (t, tet) in tets.iter().enumerate() {
+        let key = t as u32;
+        stamp_t[t] = key;
+        for &i in tet {
+            for &u in one_rings.row(i as usize) {
+                if stamp_t[u as usize] != key {
+                    stamp_t[u as usize] = key;
+                    neighbour_pairs.push((key, u));
+                }
+            }
+        }
+    }
+    Csr::from_pairs(tets.len(), &neighbour_pairs)
 }
 
 #[cfg(test)]

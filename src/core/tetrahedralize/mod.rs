@@ -439,6 +439,57 @@ struct Cleaned {
 }
 
 fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeError> {
+    check_input(positions, indices)?;
+    let Welded {
+        lo,
+        hi,
+        weld,
+        positions: welded_positions,
+    } = weld(positions);
+    let (mut tris, duplicates, degenerate) = unique_triangles(indices, &weld, &welded_positions);
+    if tris.is_empty() {
+        return Err(TetrahedralizeError::Degenerate);
+    }
+    let Patches {
+        patch,
+        mut turned,
+        count: patches,
+    } = orient_patches(&mut tris);
+    // Each patch encloses positive volume (turn it inside out otherwise). An open patch has a
+    // volume that depends on where the origin is; measured from the mesh's centre, it is
+    // positive for a surface facing outwards from there, the common case for a model.
+    let centre = (lo + hi) * 0.5;
+    let mut patch_volume = vec![0.0f64; patches as usize];
+    for (t, tri) in tris.iter().enumerate() {
+        let p = tri.map(|v| welded_positions[v as usize] - centre);
+        patch_volume[patch[t] as usize] += p[0].dot(p[1].cross(p[2])) as f64 / 6.0;
+    }
+    for (t, tri) in tris.iter_mut().enumerate() {
+        if patch_volume[patch[t] as usize] < 0.0 {
+            tri.swap(1, 2);
+            turned[t] = !turned[t];
+        }
+    }
+    let flipped = turned.iter().filter(|&&t| t).count();
+    let volume = patch_volume.iter().map(|v| v.abs()).sum();
+
+    let part_bounds = part_bounds(&tris, &welded_positions);
+
+    Ok(Cleaned {
+        triangles: tris
+            .iter()
+            .map(|t| t.map(|v| welded_positions[v as usize]))
+            .collect(),
+        volume,
+        flipped,
+        duplicates,
+        degenerate,
+        part_bounds,
+    })
+}
+
+/// Checks the triangle list: whole triangles, some, finite vertices, indices in range.
+fn check_input(positions: &[Vec3], indices: &[u32]) -> Result<(), TetrahedralizeError> {
     if !indices.len().is_multiple_of(3) {
         return Err(TetrahedralizeError::PartialTriangle(indices.len()));
     }
@@ -457,9 +508,21 @@ fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeE
             });
         }
     }
+    Ok(())
+}
 
-    // Weld vertices that sit at the same position (up to a millionth of the mesh's size), so
-    // that split vertices (UV seams, flat shading) still connect their triangles.
+/// The input's vertices welded where they sit at the same position.
+struct Welded {
+    lo: Vec3,
+    hi: Vec3,
+    /// Per input vertex, its welded vertex.
+    weld: Vec<u32>,
+    positions: Vec<Vec3>,
+}
+
+/// Welds vertices that sit at the same position (up to a millionth of the mesh's size), so
+/// that split vertices (UV seams, flat shading) still connect their triangles.
+fn weld(positions: &[Vec3]) -> Welded {
     let (lo, hi) = positions.iter().fold(
         (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
         |(a, b), p| (a.min(*p), b.max(*p)),
@@ -475,7 +538,21 @@ fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeE
             welded_positions.len() as u32 - 1
         });
     }
+    Welded {
+        lo,
+        hi,
+        weld,
+        positions: welded_positions,
+    }
+}
 
+/// The triangles on the welded vertices, without degenerate or repeated ones, and how many of
+/// each were dropped.
+fn unique_triangles(
+    indices: &[u32],
+    weld: &[u32],
+    welded_positions: &[Vec3],
+) -> (Vec<[u32; 3]>, usize, usize) {
     let mut seen = HashMap::new();
     let mut tris: Vec<[u32; 3]> = Vec::with_capacity(indices.len() / 3);
     let (mut duplicates, mut degenerate) = (0, 0);
@@ -502,10 +579,19 @@ fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeE
         }
         tris.push(tri);
     }
-    if tris.is_empty() {
-        return Err(TetrahedralizeError::Degenerate);
-    }
+    (tris, duplicates, degenerate)
+}
 
+/// The triangles' orientation patches: per triangle its patch and whether it was turned.
+struct Patches {
+    patch: Vec<u32>,
+    turned: Vec<bool>,
+    count: u32,
+}
+
+/// Orients patches: breadth-first through manifold edges (two triangles), each neighbour made
+/// to run their shared edge the other way.
+fn orient_patches(tris: &mut [[u32; 3]]) -> Patches {
     // Edges and the triangles on them.
     let mut edge_tris: HashMap<[u32; 2], Vec<u32>> = HashMap::with_capacity(tris.len() * 2);
     for (t, tri) in tris.iter().enumerate() {
@@ -520,8 +606,6 @@ fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeE
     let directed =
         |tri: &[u32; 3], a: u32, b: u32| (0..3).any(|k| tri[k] == a && tri[(k + 1) % 3] == b);
 
-    // Orient patches: breadth-first through manifold edges (two triangles), each neighbour
-    // made to run their shared edge the other way.
     let mut patch = vec![u32::MAX; tris.len()];
     let mut turned = vec![false; tris.len()];
     let mut patches = 0u32;
@@ -558,25 +642,15 @@ fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeE
         }
         patches += 1;
     }
-    // Each patch encloses positive volume (turn it inside out otherwise). An open patch has a
-    // volume that depends on where the origin is; measured from the mesh's centre, it is
-    // positive for a surface facing outwards from there, the common case for a model.
-    let centre = (lo + hi) * 0.5;
-    let mut patch_volume = vec![0.0f64; patches as usize];
-    for (t, tri) in tris.iter().enumerate() {
-        let p = tri.map(|v| welded_positions[v as usize] - centre);
-        patch_volume[patch[t] as usize] += p[0].dot(p[1].cross(p[2])) as f64 / 6.0;
+    Patches {
+        patch,
+        turned,
+        count: patches,
     }
-    for (t, tri) in tris.iter_mut().enumerate() {
-        if patch_volume[patch[t] as usize] < 0.0 {
-            tri.swap(1, 2);
-            turned[t] = !turned[t];
-        }
-    }
-    let flipped = turned.iter().filter(|&&t| t).count();
-    let volume = patch_volume.iter().map(|v| v.abs()).sum();
+}
 
-    // Parts: triangles connected through shared vertices.
+/// Parts (triangles connected through shared vertices) and their bounds.
+fn part_bounds(tris: &[[u32; 3]], welded_positions: &[Vec3]) -> Vec<(Vec3, Vec3)> {
     let mut parent: Vec<u32> = (0..welded_positions.len() as u32).collect();
     fn find(parent: &mut [u32], mut x: u32) -> u32 {
         while parent[x as usize] != x {
@@ -585,7 +659,7 @@ fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeE
         }
         x
     }
-    for tri in &tris {
+    for tri in tris {
         for k in 1..3 {
             let (a, b) = (find(&mut parent, tri[0]), find(&mut parent, tri[k]));
             parent[a as usize] = b;
@@ -593,7 +667,7 @@ fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeE
     }
     let mut part_of_root = HashMap::new();
     let mut part_bounds: Vec<(Vec3, Vec3)> = Vec::new();
-    for tri in &tris {
+    for tri in tris {
         let root = find(&mut parent, tri[0]);
         let part = *part_of_root.entry(root).or_insert_with(|| {
             part_bounds.push((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)));
@@ -605,18 +679,7 @@ fn clean(positions: &[Vec3], indices: &[u32]) -> Result<Cleaned, TetrahedralizeE
             part_bounds[part].1 = part_bounds[part].1.max(p);
         }
     }
-
-    Ok(Cleaned {
-        triangles: tris
-            .iter()
-            .map(|t| t.map(|v| welded_positions[v as usize]))
-            .collect(),
-        volume,
-        flipped,
-        duplicates,
-        degenerate,
-        part_bounds,
-    })
+    part_bounds
 }
 
 #[cfg(test)]
