@@ -62,6 +62,19 @@ pub struct AvianBodies {
     index: HashMap<Entity, u32>,
 }
 
+impl AvianBodies {
+    /// Empties every list, for the next step's gathering.
+    fn clear(&mut self) {
+        self.entities.clear();
+        self.start.clear();
+        self.sleeping.clear();
+        self.fixed.clear();
+        self.poses.clear();
+        self.colliders.clear();
+        self.index.clear();
+    }
+}
+
 /// Soft bodies among avian's rigid bodies (see the module's documentation). In
 /// [`SoftBodyPlugins`](crate::SoftBodyPlugins) when the `avian` feature is on; it goes after
 /// [`SoftBodyPlugin`](crate::SoftBodyPlugin), whose schedule it runs in.
@@ -197,13 +210,7 @@ fn gather_avian(
 ) {
     let h = time.delta_secs();
     let avian = &mut *avian;
-    avian.entities.clear();
-    avian.start.clear();
-    avian.sleeping.clear();
-    avian.fixed.clear();
-    avian.poses.clear();
-    avian.colliders.clear();
-    avian.index.clear();
+    avian.clear();
     solver.rigid.clear();
     let g = gravity.map_or(Vec3::ZERO, |g| g.0);
     for (entity, kind, position, rotation, v, w, mass, inertia, com, scale, sleeping) in

@@ -190,31 +190,13 @@ fn deform_surfaces(
         if !body.is_placed() {
             continue;
         }
-        let state = body.state();
         if surface.binding.is_none() {
-            // Not loaded yet: try again next frame.
-            let Some(mesh) = meshes.get(&mesh3d.0) else {
-                continue;
-            };
-            let Ok(VertexAttributeValues::Float32x3(vertices)) =
-                mesh.try_attribute(Mesh::ATTRIBUTE_POSITION)
-            else {
-                fail(
-                    surface,
-                    "the mesh has no Float32x3 vertex positions in the main world".into(),
-                );
-                continue;
-            };
-            let scale = body.rest_scale();
-            let rest: Vec<Vec3> = vertices.iter().map(|&v| Vec3::from(v) * scale).collect();
-            match SurfaceBinding::new(state.mesh(), &rest) {
-                Ok(binding) => {
-                    surface.points = vec![Vec3::ZERO; binding.len()];
-                    surface.particles = vec![Vec3::ZERO; state.positions().len()];
-                    surface.binding = Some(binding);
-                }
-                Err(e) => {
-                    fail(surface, e.to_string());
+            match bind(surface, body, &meshes, &mesh3d.0) {
+                Ok(true) => {}
+                // Not loaded yet: try again next frame.
+                Ok(false) => continue,
+                Err(reason) => {
+                    fail(surface, reason);
                     continue;
                 }
             }
@@ -238,6 +220,7 @@ fn deform_surfaces(
             ..
         } = surface;
         let binding = binding.as_ref().expect("bound above");
+        let state = body.state();
         for ((p, &a), &b) in particles
             .iter_mut()
             .zip(state.previous_positions())
@@ -249,24 +232,9 @@ fn deform_surfaces(
         // Vertices are written in the entity's own frame (a top-level entity: its transform is
         // its world transform).
         let to_local = transform.compute_affine().inverse();
-        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        let Ok(VertexAttributeValues::Float32x3(vertices)) =
-            mesh.try_attribute_mut(Mesh::ATTRIBUTE_POSITION)
-        else {
+        let Some(bounds) = write_vertices(&mut mesh, points, to_local) else {
             continue;
         };
-        for (v, &p) in vertices.iter_mut().zip(points.iter()) {
-            let local = to_local.transform_point3(p);
-            lo = lo.min(local);
-            hi = hi.max(local);
-            *v = local.to_array();
-        }
-        if mesh.try_indices().is_ok() {
-            let _ = mesh.try_compute_smooth_normals();
-        } else {
-            let _ = mesh.try_compute_flat_normals();
-        }
-        let bounds = Aabb::from_min_max(lo, hi);
         match aabb {
             Some(mut aabb) => *aabb = bounds,
             None => {
@@ -274,4 +242,57 @@ fn deform_surfaces(
             }
         }
     }
+}
+
+/// Binds `surface` to its body's tets once its mesh `handle` is loaded: `Ok(false)` while it
+/// is not, the reason if it cannot be bound.
+fn bind(
+    surface: &mut SoftBodySurface,
+    body: &SoftBody,
+    meshes: &Assets<Mesh>,
+    handle: &Handle<Mesh>,
+) -> Result<bool, String> {
+    let Some(mesh) = meshes.get(handle) else {
+        return Ok(false);
+    };
+    let Ok(VertexAttributeValues::Float32x3(vertices)) =
+        mesh.try_attribute(Mesh::ATTRIBUTE_POSITION)
+    else {
+        return Err("the mesh has no Float32x3 vertex positions in the main world".into());
+    };
+    let state = body.state();
+    let scale = body.rest_scale();
+    let rest: Vec<Vec3> = vertices.iter().map(|&v| Vec3::from(v) * scale).collect();
+    let binding = SurfaceBinding::new(state.mesh(), &rest).map_err(|e| e.to_string())?;
+    surface.points = vec![Vec3::ZERO; binding.len()];
+    surface.particles = vec![Vec3::ZERO; state.positions().len()];
+    surface.binding = Some(binding);
+    Ok(true)
+}
+
+/// Writes `points` (in the world) as `mesh`'s vertices in the frame `to_local`, with fresh
+/// normals; their bounds, or `None` for a mesh without Float32x3 positions.
+fn write_vertices(
+    mesh: &mut Mesh,
+    points: &[Vec3],
+    to_local: bevy::math::Affine3A,
+) -> Option<Aabb> {
+    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+    let Ok(VertexAttributeValues::Float32x3(vertices)) =
+        mesh.try_attribute_mut(Mesh::ATTRIBUTE_POSITION)
+    else {
+        return None;
+    };
+    for (v, &p) in vertices.iter_mut().zip(points.iter()) {
+        let local = to_local.transform_point3(p);
+        lo = lo.min(local);
+        hi = hi.max(local);
+        *v = local.to_array();
+    }
+    if mesh.try_indices().is_ok() {
+        let _ = mesh.try_compute_smooth_normals();
+    } else {
+        let _ = mesh.try_compute_flat_normals();
+    }
+    Some(Aabb::from_min_max(lo, hi))
 }

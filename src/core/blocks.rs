@@ -216,13 +216,9 @@ impl Blocks {
         (layer, layers)
     }
 
-    pub(crate) fn new(
-        positions: &[Vec3],
-        tets: &[[u32; 4]],
-        rest_volumes: &[f32],
-        edges: &[[u32; 2]],
-        ring_vertices: &Csr,
-    ) -> Blocks {
+    /// The blocks along the best pair of axes: each particle's block along each, the blocks'
+    /// counts and widths in layers.
+    fn block_axes(positions: &[Vec3], edges: &[[u32; 2]], ring_vertices: &Csr) -> BlockAxes {
         let n = positions.len();
         let lo = positions.iter().fold(Vec3::INFINITY, |lo, &p| lo.min(p));
         let mean_edge = edges
@@ -270,9 +266,31 @@ impl Blocks {
                 best = Some((key, ba, bb, [ca, cb], [wa, wb]));
             }
         }
-        let Some((_, ba, bb, [ca, cb], width)) = best else {
+        let Some((_, ba, bb, counts, width)) = best else {
             unreachable!("three pairs of axes were tried")
         };
+        BlockAxes {
+            ba,
+            bb,
+            counts,
+            width,
+        }
+    }
+
+    pub(crate) fn new(
+        positions: &[Vec3],
+        tets: &[[u32; 4]],
+        rest_volumes: &[f32],
+        edges: &[[u32; 2]],
+        ring_vertices: &Csr,
+    ) -> Blocks {
+        let n = positions.len();
+        let BlockAxes {
+            ba,
+            bb,
+            counts: [ca, cb],
+            width,
+        } = Self::block_axes(positions, edges, ring_vertices);
         // Tasks: blocks by colour, then row, then column.
         let colour = |x: u32, y: u32| x % 2 + 2 * (y % 2);
         let mut order: Vec<(u32, u32, u32)> = (0..cb)
@@ -356,6 +374,17 @@ impl Blocks {
             width,
         }
     }
+}
+
+/// The pair of axes the blocks are cut along (see `Blocks::block_axes`).
+struct BlockAxes {
+    /// Each particle's block along the first axis, and along the second.
+    ba: Vec<u32>,
+    bb: Vec<u32>,
+    /// Blocks along each axis.
+    counts: [u32; 2],
+    /// Layers a block spans along each axis.
+    width: [u32; 2],
 }
 
 #[cfg(test)]
