@@ -1,5 +1,5 @@
 //! The layout rules a newcomer relies on, checked on the crate's own source: no import circles
-//! between files, and no file over 800 lines outside its tests.
+//! between files, no file over 800 lines and no function over 120 lines outside its tests.
 //!
 //! An import is a `crate::`, `super::` or `self::` path in a file's code (comments and its
 //! `#[cfg(test)] mod tests` left out); it points at the file of the longest module prefix of
@@ -11,6 +11,9 @@ use std::path::{Path, PathBuf};
 
 /// Most lines a source file may have outside its tests.
 const MAX_LINES: usize = 800;
+
+/// Most lines a function may have, from its `fn` line to its closing brace, outside tests.
+const MAX_FN_LINES: usize = 120;
 
 /// Every `.rs` file under `dir`, in path order.
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -270,4 +273,113 @@ fn no_file_is_over_800_lines_outside_its_tests() {
         })
         .collect();
     assert!(long.is_empty(), "files over {MAX_LINES} lines: {long:?}");
+}
+
+/// The braces of a line of code, in order, outside string and character literals.
+fn braces(line: &str) -> Vec<char> {
+    let chars: Vec<char> = line.chars().collect();
+    let mut out = Vec::new();
+    let (mut i, mut in_string) = (0, false);
+    while i < chars.len() {
+        let c = chars[i];
+        if in_string {
+            match c {
+                '\\' => i += 1,
+                '"' => in_string = false,
+                _ => {}
+            }
+        } else if c == '"' {
+            in_string = true;
+        } else if c == '\'' && chars.get(i + 2) == Some(&'\'') {
+            i += 2;
+        } else if c == '\'' && chars.get(i + 1) == Some(&'\\') {
+            // An escaped character literal: on to its closing quote.
+            i += 2;
+            while i < chars.len() && chars[i] != '\'' {
+                i += 1;
+            }
+        } else if c == '{' || c == '}' {
+            out.push(c);
+        }
+        i += 1;
+    }
+    out
+}
+
+/// The functions in `code` (a file's code, as [`code`] gives it) with their length in lines,
+/// from the `fn` line to the closing brace; declarations without a body are left out.
+fn function_lengths(code: &str) -> Vec<(String, usize)> {
+    let lines: Vec<&str> = code.lines().collect();
+    let mut found = Vec::new();
+    for (start, line) in lines.iter().enumerate() {
+        let words: Vec<&str> = line.split_whitespace().collect();
+        let Some(at) = words.iter().position(|&w| w == "fn") else {
+            continue;
+        };
+        let qualifiers = [
+            "pub",
+            "pub(crate)",
+            "pub(super)",
+            "const",
+            "unsafe",
+            "async",
+        ];
+        if !words[..at].iter().all(|w| qualifiers.contains(w)) {
+            continue;
+        }
+        let name = words
+            .get(at + 1)
+            .map_or("", |w| w.split(['(', '<']).next().unwrap_or(""));
+        let mut depth = 0i32;
+        for (end, line) in lines.iter().enumerate().skip(start) {
+            let opened = depth > 0;
+            for brace in braces(line) {
+                depth += if brace == '{' { 1 } else { -1 };
+            }
+            if (opened || line.contains('{')) && depth == 0 {
+                found.push((name.to_string(), end - start + 1));
+                break;
+            }
+            if !opened && depth == 0 && line.trim_end().ends_with(';') {
+                break;
+            }
+        }
+    }
+    found
+}
+
+#[test]
+fn the_function_length_check_measures_functions() {
+    let mut code = String::from("pub(crate) fn long(x: u32) -> u32 {\n    let s = \"{\";\n");
+    code += &"    let c = '{';\n".repeat(MAX_FN_LINES);
+    code += "    x\n}\n\nfn short() {}\n\ntrait T {\n    fn declared(&self);\n}\n";
+    assert_eq!(
+        function_lengths(&code),
+        vec![
+            ("long".to_string(), MAX_FN_LINES + 4),
+            ("short".to_string(), 1)
+        ]
+    );
+}
+
+#[test]
+fn no_function_is_over_120_lines_outside_its_tests() {
+    let krate = this_crate();
+    let mut long = Vec::new();
+    for file in &krate.files {
+        if file.file_name().is_some_and(|n| n == "tests.rs") {
+            continue;
+        }
+        let code = code(&std::fs::read_to_string(file).unwrap());
+        for (name, lines) in function_lengths(&code) {
+            if lines > MAX_FN_LINES {
+                let file = file.strip_prefix(&krate.src).unwrap().display().to_string();
+                long.push(format!("{file}: {name} ({lines} lines)"));
+            }
+        }
+    }
+    assert!(
+        long.is_empty(),
+        "functions over {MAX_FN_LINES} lines: {long:?}"
+    );
 }

@@ -350,6 +350,23 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
 /// to the surface, the direction that pushes it out, and the barycentric weights of the
 /// nearest point. Over the triangle the distance is along the normal; off past an edge or
 /// corner on the outer side it is the distance to that edge or corner, pushed away from it.
+/// A particle found inside a triangle: what both passes' responses need.
+#[derive(Clone, Copy)]
+struct Touch {
+    /// The particle and its inverse mass.
+    i: usize,
+    w_p: f32,
+    /// The triangle's corners, and the barycentric weights of the particle's nearest point.
+    corners: [usize; 3],
+    q: Vec3,
+    /// The triangle's outward normal, and how far the particle is past it.
+    n: Vec3,
+    depth: f32,
+    /// The pair's inverse mass along the normal, and the triangle's share of it.
+    w: f32,
+    w_t: f32,
+}
+
 /// `None` for a degenerate triangle.
 fn surface_distance(xp: Vec3, corners: [Vec3; 3]) -> Option<(f32, Vec3, Vec3)> {
     let [a, b, c] = corners;
@@ -533,79 +550,121 @@ impl Contact {
         if d >= 0.0 {
             return None;
         }
-        let depth = -d;
+        let touch = Touch {
+            i,
+            w_p,
+            corners,
+            q,
+            n,
+            depth: -d,
+            w,
+            w_t,
+        };
         if self.phase == SoftContactPhase::Substep {
-            // Apart along the normal, then friction on the relative motion since the substep
-            // started: held (static) if it is within `mu` times the push, else slowed by it.
-            let shift = depth / w;
-            let moved = |k_shift: Vec3| {
-                p.x.set(i, p.x.get(i) + k_shift * w_p);
-                for k in 0..3 {
-                    let j = corners[k];
-                    t.x.set(j, t.x.get(j) - k_shift * (q[k] * t.w[j]));
-                }
-            };
-            moved(n * shift);
-            let travel = |a: &Arrays, j: usize| a.x.get(j) - a.start[j].vec3();
-            let relative_motion =
-                travel(p, i) - (0..3).map(|k| q[k] * travel(t, corners[k])).sum::<Vec3>();
-            let slip = relative_motion - n * relative_motion.dot(n);
-            let slip_length = slip.length();
-            let anchor = p.anchors.get(i);
-            let anchored = anchor.partner == self.partner && anchor.pass + 1 >= p.pass;
-            let mut held_fully = false;
-            if anchored {
-                // Static friction: back on the anchor if it is within reach.
-                let point: Vec3 = (0..3)
-                    .map(|k| anchor.weights[k] * t.x.get(anchor.corners[k] as usize))
-                    .sum();
-                let offset = p.x.get(i) - point;
-                let tangential = offset - n * offset.dot(n);
-                if tangential.length_squared() <= (self.friction * depth).powi(2) {
-                    moved(-tangential / w);
-                    held_fully = true;
-                    p.anchors.set(
-                        i,
-                        SoftAnchor {
-                            pass: p.pass,
-                            ..anchor
-                        },
-                    );
-                }
+            self.substep_contact(&touch, p, t);
+        } else {
+            self.velocity_contact(&touch, p, t, x, now);
+        }
+        Some(n)
+    }
+
+    /// A substep's contact: the particle and the triangle apart along the normal, then friction
+    /// on their relative motion since the substep started: held (static) if it is within `mu`
+    /// times the push, else slowed by it; recorded as a support for the volume impulses.
+    fn substep_contact(&self, touch: &Touch, p: &Arrays, t: &Arrays) {
+        let Touch {
+            i,
+            w_p,
+            corners,
+            q,
+            n,
+            depth,
+            w,
+            w_t,
+        } = *touch;
+        let shift = depth / w;
+        let moved = |k_shift: Vec3| {
+            p.x.set(i, p.x.get(i) + k_shift * w_p);
+            for k in 0..3 {
+                let j = corners[k];
+                t.x.set(j, t.x.get(j) - k_shift * (q[k] * t.w[j]));
             }
-            if !held_fully {
-                if slip_length > 0.0 {
-                    let held = (self.friction * depth / slip_length).min(1.0);
-                    moved(-slip * (held / w));
-                }
-                let q_end = closest_barycentric(
-                    p.x.get(i),
-                    t.x.get(corners[0]),
-                    t.x.get(corners[1]),
-                    t.x.get(corners[2]),
-                );
+        };
+        moved(n * shift);
+        let travel = |a: &Arrays, j: usize| a.x.get(j) - a.start[j].vec3();
+        let relative_motion =
+            travel(p, i) - (0..3).map(|k| q[k] * travel(t, corners[k])).sum::<Vec3>();
+        let slip = relative_motion - n * relative_motion.dot(n);
+        let slip_length = slip.length();
+        let anchor = p.anchors.get(i);
+        let anchored = anchor.partner == self.partner && anchor.pass + 1 >= p.pass;
+        let mut held_fully = false;
+        if anchored {
+            // Static friction: back on the anchor if it is within reach.
+            let point: Vec3 = (0..3)
+                .map(|k| anchor.weights[k] * t.x.get(anchor.corners[k] as usize))
+                .sum();
+            let offset = p.x.get(i) - point;
+            let tangential = offset - n * offset.dot(n);
+            if tangential.length_squared() <= (self.friction * depth).powi(2) {
+                moved(-tangential / w);
+                held_fully = true;
                 p.anchors.set(
                     i,
                     SoftAnchor {
-                        partner: self.partner,
-                        corners: corners.map(|j| j as u32),
-                        weights: q_end,
                         pass: p.pass,
+                        ..anchor
                     },
                 );
             }
-            self.supports.borrow_mut().push(SoftSupport {
-                particle: i as u32,
-                normal: n,
-                partner: self.partner,
-                corners: corners.map(|j| j as u32),
-                weights: q,
-                inv_mass: w_t,
-                friction: self.friction,
-                pushed: Vec3::ZERO,
-            });
-            return Some(n);
         }
+        if !held_fully {
+            if slip_length > 0.0 {
+                let held = (self.friction * depth / slip_length).min(1.0);
+                moved(-slip * (held / w));
+            }
+            let q_end = closest_barycentric(
+                p.x.get(i),
+                t.x.get(corners[0]),
+                t.x.get(corners[1]),
+                t.x.get(corners[2]),
+            );
+            p.anchors.set(
+                i,
+                SoftAnchor {
+                    partner: self.partner,
+                    corners: corners.map(|j| j as u32),
+                    weights: q_end,
+                    pass: p.pass,
+                },
+            );
+        }
+        self.supports.borrow_mut().push(SoftSupport {
+            particle: i as u32,
+            normal: n,
+            partner: self.partner,
+            corners: corners.map(|j| j as u32),
+            weights: q,
+            inv_mass: w_t,
+            friction: self.friction,
+            pushed: Vec3::ZERO,
+        });
+    }
+
+    /// The predicted or final pass's contact: an impulse on the relative velocity along the
+    /// normal (the predicted pass bounded by how deep the pair already was at `x`, the final
+    /// pass after undoing the penetration), then Coulomb friction.
+    fn velocity_contact(&self, touch: &Touch, p: &Arrays, t: &Arrays, x: Vec3, now: [Vec3; 3]) {
+        let Touch {
+            i,
+            w_p,
+            corners,
+            q,
+            n,
+            depth,
+            w,
+            ..
+        } = *touch;
         // An impulse (per unit mass of the pair) on the particle, and its opposite shared by
         // the triangle's corners.
         let push = |impulse: Vec3| {
@@ -645,6 +704,5 @@ impl Contact {
             let jt = (slip_speed / w).min(self.friction * normal_impulse);
             push(-slip * (jt / slip_speed));
         }
-        Some(n)
     }
 }

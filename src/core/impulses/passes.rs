@@ -4,6 +4,7 @@
 //! into the body.
 
 use super::*;
+use crate::core::Blocks;
 use crate::core::body::SoftBodyState;
 
 impl SoftBodyState {
@@ -131,14 +132,151 @@ impl SoftBodyState {
         items: &Csr,
         impulse: &BlockImpulses<'_>,
     ) {
+        self.reset_workers(spheres);
+        #[cfg(test)]
+        let clamp_regions = clamp_regions.filter(|_| !self.scratch.clamp_bounds.disabled);
+        let plan = self.plan_bounds(clamp_regions);
+        self.run_pass_phases(h, parallel, clamp_regions, &plan, items, impulse);
+        self.keep_bounds(clamp_regions, &plan);
+        self.add_up_workers(spheres);
+    }
+
+    /// The pass's phases on the threads of `parallel`: the clamp bounds in chunks (the tets',
+    /// the vertices', then the regions'; or, going on from earlier bounds, the drifts block by
+    /// block), then the blocks' impulses, each block after the blocks it waits for.
+    fn run_pass_phases(
+        &mut self,
+        h: f32,
+        parallel: &dyn Parallel,
+        clamp_regions: Option<ClampRegions>,
+        plan: &BoundsPlan,
+        items: &Csr,
+        impulse: &BlockImpulses<'_>,
+    ) {
+        let BoundsPlan {
+            carry,
+            ring_checks,
+            shapes,
+            ..
+        } = *plan;
+        let blocks = self.mesh.blocks();
+        let mesh = &*self.mesh;
+        let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
+        let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
+        let any_touching = !self.touching.is_empty();
+        let contact_second = second_contacts(&self.touching, &self.contact_second);
+        // SAFETY (for the view and every `SharedSlice` below): the pass's phases run one
+        // after another; in a chunked phase each chunk writes its own tets', vertices' or
+        // regions' entries; in a phase over the blocks a block runs after every block whose
+        // one-ring or tets it shares (`waits_for`), and writes only the particles, tets and
+        // block entries of its own items and their one-rings; each task has its own worker.
+        let mut bounds = unsafe {
+            self.scratch
+                .clamp_bounds
+                .view(clamp_regions.unwrap_or(ClampRegions::Rings))
+        };
+        bounds.ring_checks = ring_checks;
+        let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
+        let predicted = unsafe { SharedSlice::new(&mut self.scratch.predicted) };
+        let scratch = unsafe { SharedSlice::new(&mut self.scratch.per_particle) };
+        let drift = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) };
+        let move_len = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) };
+        let walks = WalkMarks {
+            walked: &self.scratch.clamp_motion.walked.0,
+            walks: &self.scratch.clamp_motion.walks.0,
+        };
+        let block_drift = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.block_drift) };
+        let ring_corrected = unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) };
+        let removed = unsafe { SharedSlice::new(&mut self.scratch.soft_removed) };
+        let far = FarDriftMarks {
+            marks: &self.scratch.clamp_motion.far_nearby.0,
+            pass: self.scratch.clamp_motion.pass_number,
+        };
+        let workers = unsafe { SharedSlice::new(&mut self.scratch.pass_workers) };
+        let waits_for = &mesh.blocks().waits_for;
+        let count = items.len();
+        // The clamp bounds are computed first, in chunks: the tets', then the vertices'
+        // (which need all tets'), then the regions' (which need all vertices'): the rings'
+        // for a one-ring pass, the tets' for a per-tet pass or to keep; threads that join
+        // late (waking one takes longer than a chunk) find the work going. A pass going on
+        // from bounds taken earlier only measures the drifts, block by block.
+        let (n, tet_count) = (mesh.vertex_count(), mesh.tet_count());
+        let (ring_chunks, chunked) = bound_chunks(n, tet_count, count, clamp_regions, plan);
+        let chunk_phase = |tasks: usize| Phase { tasks, order: None };
+        let phases = [
+            chunk_phase(chunked[0]),
+            chunk_phase(chunked[1]),
+            chunk_phase(chunked[2]),
+            Phase {
+                tasks: count,
+                order: Some((waits_for, &self.scratch.block_done[..count])),
+            },
+        ];
+        run_phases(parallel, &phases, &|phase, task| {
+            let range = |items: usize| BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(items);
+            match phase {
+                0 if shapes => bounds.compute_tet_shapes(mesh, range(tet_count)),
+                0 => bounds.compute_tets(mesh, predicted, range(tet_count)),
+                1 if shapes => bounds.compute_ring_checks(mesh, range(n)),
+                1 => bounds.compute_vertices(mesh, predicted, drift, range(n)),
+                2 if carry => {
+                    let vertices = blocks.vertices.row(task);
+                    let largest = bounds.carry_drift(mesh, predicted, drift, far, vertices);
+                    block_drift.set(task, largest);
+                }
+                2 => {
+                    if task < ring_chunks {
+                        bounds.compute_regions(mesh, ClampRegions::Rings, range(n));
+                    } else {
+                        let task = task - ring_chunks;
+                        let range = BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(tet_count);
+                        bounds.compute_regions(mesh, ClampRegions::Tets, range);
+                    }
+                }
+                _ => {
+                    let view = VolumePass {
+                        mesh,
+                        h,
+                        inv_masses,
+                        contact_normals,
+                        contact_kept,
+                        contact_second,
+                        contact_sphere,
+                        removed,
+                        any_touching,
+                        bounds,
+                        velocities,
+                        predicted,
+                        scratch,
+                        drift,
+                        move_len,
+                        walks,
+                        far,
+                        ring_corrected,
+                    };
+                    let start_drift = start_drift(workers, blocks, block_drift, carry, task);
+                    // SAFETY: each task is run by one thread only.
+                    let worker = unsafe { workers.get_mut(task) };
+                    worker.max_moved = start_drift;
+                    impulse(&view, worker, items.row(task), items.range(task).start);
+                }
+            }
+        });
+    }
+
+    /// Clears every task's worker for a pass among `spheres`.
+    fn reset_workers(&mut self, spheres: &[RigidSphereState]) {
         for worker in &mut self.scratch.pass_workers {
             worker.counters = StepCounters::default();
             worker.max_moved = 0.0;
             worker.sphere_dv.clear();
             worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
         }
-        #[cfg(test)]
-        let clamp_regions = clamp_regions.filter(|_| !self.scratch.clamp_bounds.disabled);
+    }
+
+    /// How this pass takes its clamp bounds: fresh or going on from earlier ones, with or
+    /// without the tets' regions and the rings' checks; the bounds reserved for it.
+    fn plan_bounds(&mut self, clamp_regions: Option<ClampRegions>) -> BoundsPlan {
         let take_tet_regions =
             clamp_regions == Some(ClampRegions::Tets) || self.scratch.clamp_bounds.keep_for_tets;
         self.scratch.clamp_bounds.keep_for_tets = false;
@@ -172,166 +310,31 @@ impl SoftBodyState {
         // needs from the bounds' start, in the bounds' first two phases.
         let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
         let shapes = ring_checks && !self.scratch.clamp_bounds.ring_checks_ready;
-        let blocks = self.mesh.blocks();
         if clamp_regions.is_some() {
             self.scratch.clamp_bounds.reserve(
                 &self.mesh,
-                blocks.count(),
+                self.mesh.blocks().count(),
                 &mut self.scratch.clamp_motion,
             );
             self.scratch.clamp_bounds.active = true;
             self.scratch.clamp_motion.next_pass();
         }
-        {
-            let mesh = &*self.mesh;
-            let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
-            let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
-            let any_touching = !self.touching.is_empty();
-            let contact_second = second_contacts(&self.touching, &self.contact_second);
-            // SAFETY (for the view and every `SharedSlice` below): the pass's phases run one
-            // after another; in a chunked phase each chunk writes its own tets', vertices' or
-            // regions' entries; in a phase over the blocks a block runs after every block whose
-            // one-ring or tets it shares (`waits_for`), and writes only the particles, tets and
-            // block entries of its own items and their one-rings; each task has its own worker.
-            let mut bounds = unsafe {
-                self.scratch
-                    .clamp_bounds
-                    .view(clamp_regions.unwrap_or(ClampRegions::Rings))
-            };
-            bounds.ring_checks = ring_checks;
-            let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
-            let predicted = unsafe { SharedSlice::new(&mut self.scratch.predicted) };
-            let scratch = unsafe { SharedSlice::new(&mut self.scratch.per_particle) };
-            let drift = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) };
-            let move_len = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) };
-            let walks = WalkMarks {
-                walked: &self.scratch.clamp_motion.walked.0,
-                walks: &self.scratch.clamp_motion.walks.0,
-            };
-            let block_drift =
-                unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.block_drift) };
-            let ring_corrected = unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) };
-            let removed = unsafe { SharedSlice::new(&mut self.scratch.soft_removed) };
-            let far = FarDriftMarks {
-                marks: &self.scratch.clamp_motion.far_nearby.0,
-                pass: self.scratch.clamp_motion.pass_number,
-            };
-            let workers = unsafe { SharedSlice::new(&mut self.scratch.pass_workers) };
-            let waits_for = &mesh.blocks().waits_for;
-            let count = items.len();
-            // The clamp bounds are computed first, in chunks: the tets', then the vertices'
-            // (which need all tets'), then the regions' (which need all vertices'): the rings'
-            // for a one-ring pass, the tets' for a per-tet pass or to keep; threads that join
-            // late (waking one takes longer than a chunk) find the work going. A pass going on
-            // from bounds taken earlier only measures the drifts, block by block.
-            let (n, tet_count) = (mesh.vertex_count(), mesh.tet_count());
-            let fresh = clamp_regions.is_some() && !carry;
-            let chunks = |items: usize| {
-                if fresh {
-                    items.div_ceil(BOUNDS_CHUNK)
-                } else {
-                    0
-                }
-            };
-            let ring_chunks = match clamp_regions {
-                Some(ClampRegions::Rings) => chunks(n),
-                _ => 0,
-            };
-            let tet_chunks = if take_tet_regions {
-                chunks(tet_count)
-            } else {
-                0
-            };
-            let chunk_phase = |tasks: usize| Phase { tasks, order: None };
-            let shape_chunks = |items: usize| {
-                if shapes {
-                    items.div_ceil(BOUNDS_CHUNK)
-                } else {
-                    0
-                }
-            };
-            let phases = [
-                chunk_phase(chunks(tet_count) + shape_chunks(tet_count)),
-                chunk_phase(chunks(n) + shape_chunks(n)),
-                chunk_phase(if carry {
-                    count
-                } else {
-                    ring_chunks + tet_chunks
-                }),
-                Phase {
-                    tasks: count,
-                    order: Some((waits_for, &self.scratch.block_done[..count])),
-                },
-            ];
-            run_phases(parallel, &phases, &|phase, task| {
-                let range =
-                    |items: usize| BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(items);
-                match phase {
-                    0 if shapes => bounds.compute_tet_shapes(mesh, range(tet_count)),
-                    0 => bounds.compute_tets(mesh, predicted, range(tet_count)),
-                    1 if shapes => bounds.compute_ring_checks(mesh, range(n)),
-                    1 => bounds.compute_vertices(mesh, predicted, drift, range(n)),
-                    2 if carry => {
-                        let vertices = blocks.vertices.row(task);
-                        let largest = bounds.carry_drift(mesh, predicted, drift, far, vertices);
-                        block_drift.set(task, largest);
-                    }
-                    2 => {
-                        if task < ring_chunks {
-                            bounds.compute_regions(mesh, ClampRegions::Rings, range(n));
-                        } else {
-                            let task = task - ring_chunks;
-                            let range =
-                                BOUNDS_CHUNK * task..(BOUNDS_CHUNK * (task + 1)).min(tet_count);
-                            bounds.compute_regions(mesh, ClampRegions::Tets, range);
-                        }
-                    }
-                    _ => {
-                        let view = VolumePass {
-                            mesh,
-                            h,
-                            inv_masses,
-                            contact_normals,
-                            contact_kept,
-                            contact_second,
-                            contact_sphere,
-                            removed,
-                            any_touching,
-                            bounds,
-                            velocities,
-                            predicted,
-                            scratch,
-                            drift,
-                            move_len,
-                            walks,
-                            far,
-                            ring_corrected,
-                        };
-                        // The particles this task reads were last moved by the tasks it
-                        // waits for (done by now): their largest drift bounds those
-                        // particles' drift; going on from earlier bounds, so does the largest
-                        // drift at the start in this block and its neighbours (a block's
-                        // impulses read no further).
-                        let mut start_drift = 0.0f32;
-                        if carry {
-                            start_drift = block_drift.get(task);
-                            for &near in blocks.neighbours.row(task) {
-                                start_drift = larger(start_drift, block_drift.get(near as usize));
-                            }
-                        }
-                        for &earlier in waits_for.row(task) {
-                            // SAFETY: that task is done; nothing writes its worker now.
-                            let moved = unsafe { workers.get_mut(earlier as usize) }.max_moved;
-                            start_drift = larger(start_drift, moved);
-                        }
-                        // SAFETY: each task is run by one thread only.
-                        let worker = unsafe { workers.get_mut(task) };
-                        worker.max_moved = start_drift;
-                        impulse(&view, worker, items.row(task), items.range(task).start);
-                    }
-                }
-            });
+        BoundsPlan {
+            take_tet_regions,
+            carry,
+            ring_checks,
+            shapes,
         }
+    }
+
+    /// After a pass: which bounds are kept for the passes that go on from them.
+    fn keep_bounds(&mut self, clamp_regions: Option<ClampRegions>, plan: &BoundsPlan) {
+        let BoundsPlan {
+            take_tet_regions,
+            carry,
+            shapes,
+            ..
+        } = *plan;
         self.scratch.clamp_bounds.active = false;
         let bounds = &mut self.scratch.clamp_bounds;
         match (clamp_regions, carry) {
@@ -358,6 +361,10 @@ impl SoftBodyState {
             }
             _ => {}
         }
+    }
+
+    /// Adds up the tasks' counters and sphere velocity changes, in task order.
+    fn add_up_workers(&mut self, spheres: &mut [RigidSphereState]) {
         let c = &mut self.counters;
         for worker in &self.scratch.pass_workers {
             let w = &worker.counters;
@@ -484,4 +491,94 @@ fn second_contacts<'a>(touching: &[u32], second: &'a [Vec3]) -> Option<&'a [Vec3
         .iter()
         .any(|&i| second[i as usize] != Vec3::ZERO)
         .then_some(second)
+}
+
+/// What bounds the drift of the particles block `task` reads: they were last moved by the
+/// tasks it waits for (done by now), so those tasks' largest drift bounds them; going on from
+/// earlier bounds (`carry`), so does the largest drift at the start in this block and its
+/// neighbours (a block's impulses read no further).
+#[inline(always)]
+fn start_drift(
+    workers: SharedSlice<'_, PassWorker>,
+    blocks: &Blocks,
+    block_drift: SharedSlice<'_, f32>,
+    carry: bool,
+    task: usize,
+) -> f32 {
+    let waits_for = &blocks.waits_for;
+    let mut start_drift = 0.0f32;
+    if carry {
+        start_drift = block_drift.get(task);
+        for &near in blocks.neighbours.row(task) {
+            start_drift = larger(start_drift, block_drift.get(near as usize));
+        }
+    }
+    for &earlier in waits_for.row(task) {
+        // SAFETY: that task is done; nothing writes its worker now.
+        let moved = unsafe { workers.get_mut(earlier as usize) }.max_moved;
+        start_drift = larger(start_drift, moved);
+    }
+    start_drift
+}
+
+/// The tasks of the bounds' three chunked phases, for a body of `n` vertices and `tet_count`
+/// tets whose pass has `blocks` blocks, and how many of the third phase's are the rings'
+/// regions (the rest are the tets').
+fn bound_chunks(
+    n: usize,
+    tet_count: usize,
+    blocks: usize,
+    clamp_regions: Option<ClampRegions>,
+    plan: &BoundsPlan,
+) -> (usize, [usize; 3]) {
+    let fresh = clamp_regions.is_some() && !plan.carry;
+    let chunks = |items: usize| {
+        if fresh {
+            items.div_ceil(BOUNDS_CHUNK)
+        } else {
+            0
+        }
+    };
+    let ring_chunks = match clamp_regions {
+        Some(ClampRegions::Rings) => chunks(n),
+        _ => 0,
+    };
+    let tet_chunks = if plan.take_tet_regions {
+        chunks(tet_count)
+    } else {
+        0
+    };
+    let shape_chunks = |items: usize| {
+        if plan.shapes {
+            items.div_ceil(BOUNDS_CHUNK)
+        } else {
+            0
+        }
+    };
+    let third = if plan.carry {
+        blocks
+    } else {
+        ring_chunks + tet_chunks
+    };
+    (
+        ring_chunks,
+        [
+            chunks(tet_count) + shape_chunks(tet_count),
+            chunks(n) + shape_chunks(n),
+            third,
+        ],
+    )
+}
+
+/// How a pass takes its clamp bounds (see `SoftBodyState::plan_bounds`).
+#[derive(Clone, Copy)]
+struct BoundsPlan {
+    /// Whether the tets' regions are taken (for a per-tet pass, or to keep for one).
+    take_tet_regions: bool,
+    /// Whether the pass goes on from bounds taken earlier.
+    carry: bool,
+    /// Whether the rings' checks are answered by the bounds (a quiet body going on).
+    ring_checks: bool,
+    /// Whether this pass computes what the rings' checks need.
+    shapes: bool,
 }

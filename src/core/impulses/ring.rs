@@ -171,7 +171,7 @@ impl VolumePass<'_> {
         p: usize,
         settings: &ImpulseSettings,
     ) -> ImpulseOutcome {
-        let (tolerance, clamp) = (settings.tolerance, settings.neighbour_clamp);
+        let clamp = settings.neighbour_clamp;
         let mesh = self.mesh;
         let ring = mesh.one_ring(p);
         let corners = mesh.ring_corners(p);
@@ -182,142 +182,19 @@ impl VolumePass<'_> {
             work.predicted[k] = self.predicted.get(i as usize);
         }
         let groups = ring.len().div_ceil(LANES);
-        let ring_v0 = mesh.ring_rest_volumes(p);
-        let rest = mesh.ring_rest_volume(p);
-        let sixth = f32x4::splat(SIXTH);
-        // The check against the tolerances (see `ImpulseSettings::ring_tet_tolerance`); a
-        // broken (NaN) volume is not within them. A ring found past them when last checked
-        // (most of a moving body's, pass after pass) is computed in full at once; any other
-        // (most of a resting body's) first from its tets' volumes alone, with nothing stored,
-        // and again in full only if it is corrected after all. Both give the same numbers:
-        // the volume is `ea . ga` with the gradient `ga = eb x ec / 6` either way.
-        let mut tet_outside_tolerance = f32x4::ZERO;
-        let mut ring_error = f32x4::ZERO;
-        let ring_tet_tolerance = f32x4::splat(settings.ring_tet_tolerance);
-        // A ring with a sliver holds its tets to `ring_check_volumes` (the sliver's infinite);
-        // any other to their rest volumes, read with them.
-        let checked = mesh.ring_has_sliver(p).then(|| mesh.ring_check_volumes(p));
-        let check_volume = |group: usize, v0: f32x4| match checked {
-            None => v0,
-            Some(checked) => f32x4::new(std::array::from_fn(|l| {
-                checked.get(LANES * group + l).copied().unwrap_or(0.0)
-            })),
+        if !self.ring_outside_tolerance(work, p, settings) {
+            return ImpulseOutcome::Skipped;
+        }
+        let Some(tet_step) = self.ring_directions(work, p, groups) else {
+            return ImpulseOutcome::Skipped;
         };
-        let computed = self.ring_corrected.get(p);
-        if computed {
-            for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
-                let (full, v0) = ring_group_lanes(&work.predicted, ring_v0, corners, group);
-                *lanes = full;
-                tet_outside_tolerance |= full
-                    .error
-                    .abs()
-                    .cmp_gt(ring_tet_tolerance * check_volume(group, v0));
-                ring_error += full.error;
-            }
-        } else {
-            for group in 0..groups {
-                let (edges, v0) = ring_group_edges(&work.predicted, ring_v0, corners, group);
-                let error = edges[0].dot(edges[1].cross(edges[2]).scale(sixth)) - v0;
-                tet_outside_tolerance |= error
-                    .abs()
-                    .cmp_gt(ring_tet_tolerance * check_volume(group, v0));
-                ring_error += error;
-            }
-        }
-        let ring_within = ring_error.reduce_add().abs() <= tolerance * rest as f32;
-        let within = ring_within && !tet_outside_tolerance.any();
-        self.ring_corrected.set(p, !within);
-        if within {
-            return ImpulseOutcome::Skipped;
-        }
-        if !computed {
-            for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
-                *lanes = ring_group_lanes(&work.predicted, ring_v0, corners, group).0;
-            }
-        }
-        for (k, &i) in vertices.iter().enumerate() {
-            work.inv_masses[k] = self.inv_masses[i as usize];
-            work.directions[k] = Vec3::ZERO;
-        }
-        // Each tet's directions `d_i = -w_i C_t grad_i`, summed per particle in ring order; the
-        // stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
-        let mut stiffest = f32x4::ZERO;
-        let mut moves = f32x4::ZERO;
-        // The centre is every tet's last corner: its direction is summed here, not in memory
-        // (one add after another into the same element waited on each other's store).
-        let mut centre = Vec3::ZERO;
-        let centre_inv_mass = f32x4::splat(work.inv_masses[0]);
-        for (group, lanes) in work.tets[..groups].iter().enumerate() {
-            let tet_corners: [[u16; 4]; LANES] =
-                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
-            let [ga, gb, gc] = lanes.gradients;
-            let g = [ga, gb, gc, -(ga + gb + gc)];
-            let mut stiffness = f32x4::ZERO;
-            let mut d = [Vec3x4::ZERO; 4];
-            // Tets at their rest volume exactly (and unused lanes) take no part.
-            let counts = lanes.error.cmp_ne(f32x4::ZERO);
-            for k in 0..4 {
-                let w = if k == 3 {
-                    centre_inv_mass
-                } else {
-                    f32x4::new(gather_f32(&work.inv_masses, &tet_corners, k))
-                };
-                stiffness += w * g[k].length_squared();
-                d[k] = g[k].scale(-w * lanes.error);
-                let zero = f32x4::ZERO;
-                moves |= counts & (d[k].x.cmp_ne(zero) | d[k].y.cmp_ne(zero) | d[k].z.cmp_ne(zero));
-            }
-            stiffest = stiffest.max(counts & stiffness);
-            let errors = lanes.error.to_array();
-            let d = d.map(Vec3x4::to_vecs);
-            for l in 0..LANES {
-                if errors[l] == 0.0 {
-                    continue;
-                }
-                for k in 0..3 {
-                    work.directions[tet_corners[l][k] as usize] += d[k][l];
-                }
-                centre += d[3][l];
-            }
-        }
-        work.directions[0] = centre;
-        let stiffest = stiffest.to_array().into_iter().fold(0.0f32, f32::max);
-        let tet_step = 1.0 / stiffest as f64;
-        if !moves.any() {
-            return ImpulseOutcome::Skipped;
-        }
         if self.any_touching {
             for (k, &i) in vertices.iter().enumerate() {
                 work.original[k] = work.directions[k];
                 work.directions[k] = self.constrain_direction(i as usize, work.directions[k]);
             }
         }
-        // The ring's volume polynomial, summed in `f64` lane by lane over the ring's groups of
-        // tets, then over the lanes (four short sums instead of one long chain of additions,
-        // each waiting for the last).
-        let mut sums = [[0.0f64; LANES]; 4];
-        let sixth = 1.0 / 6.0;
-        for (group, lanes) in work.tets[..groups].iter().enumerate() {
-            let tet_corners: [[u16; 4]; LANES] =
-                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
-            let dir = |k: usize| gather(&work.directions, &tet_corners, k);
-            let dd = Vec3x4::splat(work.directions[0]);
-            let (fa, fb, fc) = (dir(0) - dd, dir(1) - dd, dir(2) - dd);
-            let [c1, c2, c3] = volume_polynomial_lanes(lanes.edges, lanes.gradients, [fa, fb, fc]);
-            // Unused lanes hold collapsed tets: zero volume and coefficients.
-            for (sum, c) in sums.iter_mut().zip([lanes.volume, c1, c2, c3]) {
-                for (s, c) in sum.iter_mut().zip(c.to_array()) {
-                    *s += c as f64;
-                }
-            }
-        }
-        let total = |k: usize| sums[k].iter().sum::<f64>();
-        let poly: Cubic = [
-            total(0) - rest,
-            total(1),
-            total(2) * sixth,
-            total(3) * sixth,
-        ];
+        let poly = ring_polynomial(work, corners, groups, mesh.ring_rest_volume(p));
         let Some(root) = monotone_root(&poly) else {
             worker.counters.rings_without_root += 1;
             return ImpulseOutcome::NoRoot;
@@ -361,4 +238,164 @@ impl VolumePass<'_> {
             clamped,
         }
     }
+
+    /// Checks ring `p` against the tolerances (see `ImpulseSettings::ring_tet_tolerance`),
+    /// its particles' predicted positions gathered in `work`; a broken (NaN) volume is not
+    /// within them. Returns whether it is outside them, its tets then computed in full in
+    /// `work.tets`.
+    #[inline(always)]
+    fn ring_outside_tolerance(
+        &self,
+        work: &mut RingWork,
+        p: usize,
+        settings: &ImpulseSettings,
+    ) -> bool {
+        let tolerance = settings.tolerance;
+        let mesh = self.mesh;
+        let ring = mesh.one_ring(p);
+        let corners = mesh.ring_corners(p);
+        let groups = ring.len().div_ceil(LANES);
+        let ring_v0 = mesh.ring_rest_volumes(p);
+        let rest = mesh.ring_rest_volume(p);
+        let sixth = f32x4::splat(SIXTH);
+        // A ring found past them when last checked
+        // (most of a moving body's, pass after pass) is computed in full at once; any other
+        // (most of a resting body's) first from its tets' volumes alone, with nothing stored,
+        // and again in full only if it is corrected after all. Both give the same numbers:
+        // the volume is `ea . ga` with the gradient `ga = eb x ec / 6` either way.
+        let mut tet_outside_tolerance = f32x4::ZERO;
+        let mut ring_error = f32x4::ZERO;
+        let ring_tet_tolerance = f32x4::splat(settings.ring_tet_tolerance);
+        // A ring with a sliver holds its tets to `ring_check_volumes` (the sliver's infinite);
+        // any other to their rest volumes, read with them.
+        let checked = mesh.ring_has_sliver(p).then(|| mesh.ring_check_volumes(p));
+        let check_volume = |group: usize, v0: f32x4| match checked {
+            None => v0,
+            Some(checked) => f32x4::new(std::array::from_fn(|l| {
+                checked.get(LANES * group + l).copied().unwrap_or(0.0)
+            })),
+        };
+        let computed = self.ring_corrected.get(p);
+        if computed {
+            for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
+                let (full, v0) = ring_group_lanes(&work.predicted, ring_v0, corners, group);
+                *lanes = full;
+                tet_outside_tolerance |= full
+                    .error
+                    .abs()
+                    .cmp_gt(ring_tet_tolerance * check_volume(group, v0));
+                ring_error += full.error;
+            }
+        } else {
+            for group in 0..groups {
+                let (edges, v0) = ring_group_edges(&work.predicted, ring_v0, corners, group);
+                let error = edges[0].dot(edges[1].cross(edges[2]).scale(sixth)) - v0;
+                tet_outside_tolerance |= error
+                    .abs()
+                    .cmp_gt(ring_tet_tolerance * check_volume(group, v0));
+                ring_error += error;
+            }
+        }
+        let ring_within = ring_error.reduce_add().abs() <= tolerance * rest as f32;
+        let within = ring_within && !tet_outside_tolerance.any();
+        self.ring_corrected.set(p, !within);
+        if within {
+            return false;
+        }
+        if !computed {
+            for (group, lanes) in work.tets[..groups].iter_mut().enumerate() {
+                *lanes = ring_group_lanes(&work.predicted, ring_v0, corners, group).0;
+            }
+        }
+        true
+    }
+
+    /// Each tet's directions `d_i = -w_i C_t grad_i`, summed per particle of ring `p` into
+    /// `work.directions` in ring order. Returns the ring's step limit from its stiffest tet,
+    /// or `None` if no particle would move.
+    #[inline(always)]
+    fn ring_directions(&self, work: &mut RingWork, p: usize, groups: usize) -> Option<f64> {
+        let corners = self.mesh.ring_corners(p);
+        let vertices = self.mesh.ring_vertices(p);
+        for (k, &i) in vertices.iter().enumerate() {
+            work.inv_masses[k] = self.inv_masses[i as usize];
+            work.directions[k] = Vec3::ZERO;
+        }
+        // The stiffest tet sets the ring's step limit: `1 / max(stiffness)`, one division.
+        let mut stiffest = f32x4::ZERO;
+        let mut moves = f32x4::ZERO;
+        // The centre is every tet's last corner: its direction is summed here, not in memory
+        // (one add after another into the same element waited on each other's store).
+        let mut centre = Vec3::ZERO;
+        let centre_inv_mass = f32x4::splat(work.inv_masses[0]);
+        for (group, lanes) in work.tets[..groups].iter().enumerate() {
+            let tet_corners: [[u16; 4]; LANES] =
+                std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
+            let [ga, gb, gc] = lanes.gradients;
+            let g = [ga, gb, gc, -(ga + gb + gc)];
+            let mut stiffness = f32x4::ZERO;
+            let mut d = [Vec3x4::ZERO; 4];
+            // Tets at their rest volume exactly (and unused lanes) take no part.
+            let counts = lanes.error.cmp_ne(f32x4::ZERO);
+            for k in 0..4 {
+                let w = if k == 3 {
+                    centre_inv_mass
+                } else {
+                    f32x4::new(gather_f32(&work.inv_masses, &tet_corners, k))
+                };
+                stiffness += w * g[k].length_squared();
+                d[k] = g[k].scale(-w * lanes.error);
+                let zero = f32x4::ZERO;
+                moves |= counts & (d[k].x.cmp_ne(zero) | d[k].y.cmp_ne(zero) | d[k].z.cmp_ne(zero));
+            }
+            stiffest = stiffest.max(counts & stiffness);
+            let errors = lanes.error.to_array();
+            let d = d.map(Vec3x4::to_vecs);
+            for l in 0..LANES {
+                if errors[l] == 0.0 {
+                    continue;
+                }
+                for k in 0..3 {
+                    work.directions[tet_corners[l][k] as usize] += d[k][l];
+                }
+                centre += d[3][l];
+            }
+        }
+        work.directions[0] = centre;
+        let stiffest = stiffest.to_array().into_iter().fold(0.0f32, f32::max);
+        let tet_step = 1.0 / stiffest as f64;
+        moves.any().then_some(tet_step)
+    }
+}
+
+/// A ring's volume polynomial along its directions in `work`, as a cubic in the step `s`:
+/// `sum_t V_t(s) - rest`.
+#[inline(always)]
+fn ring_polynomial(work: &RingWork, corners: &[[u16; 4]], groups: usize, rest: f64) -> Cubic {
+    // The ring's volume polynomial, summed in `f64` lane by lane over the ring's groups of
+    // tets, then over the lanes (four short sums instead of one long chain of additions,
+    // each waiting for the last).
+    let mut sums = [[0.0f64; LANES]; 4];
+    let sixth = 1.0 / 6.0;
+    for (group, lanes) in work.tets[..groups].iter().enumerate() {
+        let tet_corners: [[u16; 4]; LANES] =
+            std::array::from_fn(|l| corners.get(LANES * group + l).copied().unwrap_or([0; 4]));
+        let dir = |k: usize| gather(&work.directions, &tet_corners, k);
+        let dd = Vec3x4::splat(work.directions[0]);
+        let (fa, fb, fc) = (dir(0) - dd, dir(1) - dd, dir(2) - dd);
+        let [c1, c2, c3] = volume_polynomial_lanes(lanes.edges, lanes.gradients, [fa, fb, fc]);
+        // Unused lanes hold collapsed tets: zero volume and coefficients.
+        for (sum, c) in sums.iter_mut().zip([lanes.volume, c1, c2, c3]) {
+            for (s, c) in sum.iter_mut().zip(c.to_array()) {
+                *s += c as f64;
+            }
+        }
+    }
+    let total = |k: usize| sums[k].iter().sum::<f64>();
+    [
+        total(0) - rest,
+        total(1),
+        total(2) * sixth,
+        total(3) * sixth,
+    ]
 }

@@ -67,37 +67,7 @@ impl VolumePass<'_> {
         });
         let original = d;
         if self.any_touching {
-            // `constrain_direction` in lanes: a particle touching nothing has a zero normal.
-            for (k, dk) in d.iter_mut().enumerate() {
-                let normal = Vec3x4::from_vecs(std::array::from_fn(|l| {
-                    self.contact_normals[tets[l][k] as usize]
-                }));
-                let kept = f32x4::new(std::array::from_fn(|l| {
-                    self.contact_kept[tets[l][k] as usize]
-                }));
-                let into = dk.dot(normal).min(f32x4::ZERO);
-                *dk = *dk - normal.scale(into * (f32x4::ONE - kept));
-                if let Some(second) = self.contact_second {
-                    // `constrained_push`'s second surface, in lanes.
-                    let second =
-                        Vec3x4::from_vecs(std::array::from_fn(|l| second[tets[l][k] as usize]));
-                    let into = dk.dot(second);
-                    let pushed = *dk - second.scale(into.min(f32x4::ZERO));
-                    let edge = normal.cross(second);
-                    let along = edge.scale(
-                        pushed.dot(edge)
-                            / edge.length_squared().max(f32x4::splat(f32::MIN_POSITIVE)),
-                    );
-                    let back_in = into.cmp_lt(f32x4::ZERO)
-                        & pushed.dot(normal).cmp_lt(f32x4::ZERO)
-                        & kept.cmp_eq(f32x4::ZERO);
-                    *dk = Vec3x4 {
-                        x: back_in.blend(along.x, pushed.x),
-                        y: back_in.blend(along.y, pushed.y),
-                        z: back_in.blend(along.z, pushed.z),
-                    };
-                }
-            }
+            self.constrain_directions_in_lanes(&tets, &mut d);
         }
         let f = [d[0] - d[3], d[1] - d[3], d[2] - d[3]];
         let [c1, c2, c3] = volume_polynomial_lanes([ea, eb, ec], [ga, gb, gc], f);
@@ -162,5 +132,40 @@ impl VolumePass<'_> {
             };
         }
         outcomes
+    }
+
+    /// `constrain_direction` in lanes, on the four corners' directions `d` of the bundle's
+    /// `tets`: a particle touching nothing has a zero normal, so its direction is unchanged.
+    #[inline(always)]
+    fn constrain_directions_in_lanes(&self, tets: &[[u32; 4]; LANES], d: &mut [Vec3x4; 4]) {
+        for (k, dk) in d.iter_mut().enumerate() {
+            let normal = Vec3x4::from_vecs(std::array::from_fn(|l| {
+                self.contact_normals[tets[l][k] as usize]
+            }));
+            let kept = f32x4::new(std::array::from_fn(|l| {
+                self.contact_kept[tets[l][k] as usize]
+            }));
+            let into = dk.dot(normal).min(f32x4::ZERO);
+            *dk = *dk - normal.scale(into * (f32x4::ONE - kept));
+            if let Some(second) = self.contact_second {
+                // `constrained_push`'s second surface, in lanes.
+                let second =
+                    Vec3x4::from_vecs(std::array::from_fn(|l| second[tets[l][k] as usize]));
+                let into = dk.dot(second);
+                let pushed = *dk - second.scale(into.min(f32x4::ZERO));
+                let edge = normal.cross(second);
+                let along = edge.scale(
+                    pushed.dot(edge) / edge.length_squared().max(f32x4::splat(f32::MIN_POSITIVE)),
+                );
+                let back_in = into.cmp_lt(f32x4::ZERO)
+                    & pushed.dot(normal).cmp_lt(f32x4::ZERO)
+                    & kept.cmp_eq(f32x4::ZERO);
+                *dk = Vec3x4 {
+                    x: back_in.blend(along.x, pushed.x),
+                    y: back_in.blend(along.y, pushed.y),
+                    z: back_in.blend(along.z, pushed.z),
+                };
+            }
+        }
     }
 }
