@@ -202,7 +202,10 @@ pub struct ElasticSettings {
 impl ElasticSettings {
     /// The default substep, 1/240 s.
     pub const DEFAULT_MAX_SUBSTEP: f32 = 1.0 / 240.0;
-    /// The most substeps a step takes for the motion (see [`ElasticSettings::max_motion`]).
+    /// The most substeps a step of 1/60 s or less takes for the motion (see
+    /// [`ElasticSettings::max_motion`]). A longer step may take as many more as keep its
+    /// substeps as short as a 60 Hz step's can be (`MAX_SUBSTEPS` per 1/60 s), so that a game
+    /// at 30 Hz meets a landing as finely as one at 60 Hz.
     pub const MAX_SUBSTEPS: u32 = 64;
 
     /// The default Poisson's ratio, 0.499.
@@ -239,11 +242,13 @@ impl ElasticSettings {
         let for_step = ((h / self.max_substep) * (1.0 - 1e-4))
             .ceil()
             .clamp(1.0, 1000.0);
+        let most = Self::MAX_SUBSTEPS as f32;
+        let most = most.max((h * 60.0 * most * (1.0 - 1e-4)).ceil());
         let for_motion = (h * speed / (self.max_motion * shortest_edge)).ceil();
         let for_motion = if for_motion.is_finite() {
-            for_motion.min(Self::MAX_SUBSTEPS as f32)
+            for_motion.min(most)
         } else {
-            Self::MAX_SUBSTEPS as f32
+            most
         };
         for_step.max(for_motion) as u32
     }
@@ -544,5 +549,17 @@ mod tests {
                 assert_eq!(e.tet_compliance(), [f32::INFINITY; 2]);
             }
         }
+    }
+
+    /// A landing asks for as many substeps as the cap allows: the same 64 at 60 Hz and above,
+    /// twice as many at 30 Hz, so that no rate meets it with longer substeps than 60 Hz.
+    #[test]
+    fn the_substep_cap_keeps_substeps_as_short_as_at_60_hz() {
+        let elastic = ElasticSettings::new(1e6, 0.0);
+        let landing = |hz: f32| elastic.substeps(1.0 / hz, f32::INFINITY, 0.01);
+        assert_eq!(landing(60.0), ElasticSettings::MAX_SUBSTEPS);
+        assert_eq!(landing(120.0), ElasticSettings::MAX_SUBSTEPS);
+        assert_eq!(landing(240.0), ElasticSettings::MAX_SUBSTEPS);
+        assert_eq!(landing(30.0), 2 * ElasticSettings::MAX_SUBSTEPS);
     }
 }
