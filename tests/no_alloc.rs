@@ -90,23 +90,12 @@ fn steps_allocate_nothing_after_the_first() {
             Pose::from_parts(Vec3::new(0.0, -0.05, 0.0), glam::Quat::IDENTITY),
             0.8,
         )];
-        body.step_with_contacts(
-            0.01,
-            Vec3::new(0.0, -9.81, 0.0),
-            &mut spheres,
-            &colliders,
-            &Serial,
-        );
+        let gravity = Vec3::new(0.0, -9.81, 0.0);
+        body.step_with_contacts(0.01, gravity, &mut spheres, &colliders, &Serial);
         ALLOCATIONS.store(0, Ordering::Relaxed);
         COUNTING.with(|c| c.set(true));
         for _ in 0..50 {
-            body.step_with_contacts(
-                0.01,
-                Vec3::new(0.0, -9.81, 0.0),
-                &mut spheres,
-                &colliders,
-                &Serial,
-            );
+            body.step_with_contacts(0.01, gravity, &mut spheres, &colliders, &Serial);
         }
         COUNTING.with(|c| c.set(false));
         let contacts = body.contacts().count();

@@ -182,7 +182,7 @@ impl VolumePass<'_> {
             work.predicted[k] = self.predicted.get(i as usize);
         }
         let groups = ring.len().div_ceil(LANES);
-        if !self.ring_outside_tolerance(work, p, settings) {
+        if !self.ring_outside_tolerance(work, p, groups, settings) {
             return ImpulseOutcome::Skipped;
         }
         let Some(tet_step) = self.ring_directions(work, p, groups) else {
@@ -239,22 +239,21 @@ impl VolumePass<'_> {
         }
     }
 
-    /// Checks ring `p` against the tolerances (see `ImpulseSettings::ring_tet_tolerance`),
-    /// its particles' predicted positions gathered in `work`; a broken (NaN) volume is not
-    /// within them. Returns whether it is outside them, its tets then computed in full in
-    /// `work.tets`.
+    /// Checks ring `p` (its tets in `groups` of lanes) against the tolerances (see
+    /// `ImpulseSettings::ring_tet_tolerance`), its particles' predicted positions gathered in
+    /// `work`; a broken (NaN) volume is not within them. Returns whether it is outside them,
+    /// its tets then computed in full in `work.tets`.
     #[inline(always)]
     fn ring_outside_tolerance(
         &self,
         work: &mut RingWork,
         p: usize,
+        groups: usize,
         settings: &ImpulseSettings,
     ) -> bool {
         let tolerance = settings.tolerance;
         let mesh = self.mesh;
-        let ring = mesh.one_ring(p);
         let corners = mesh.ring_corners(p);
-        let groups = ring.len().div_ceil(LANES);
         let ring_v0 = mesh.ring_rest_volumes(p);
         let rest = mesh.ring_rest_volume(p);
         let sixth = f32x4::splat(SIXTH);
