@@ -22,8 +22,9 @@
 //! `--only NAME` runs the scenes whose name contains NAME, `--method NAME` only that method
 //! (`baseline`, `paper` or `xpbd`: for a profiler that should see one method's code alone);
 //! `--stages` adds a line per run with the mean time of each stage of the step
-//! (`SoftBodyStepTime::mean_stage_ms`): `scene=NAME method=NAME threads=N stages forces_ms=X
-//! contacts_ms=X one_ring_ms=X per_tet_ms=X plasticity_ms=X integrate_ms=X`; `--tolerance X` and
+//! and of its substeps (`SoftBodyStepTime::mean_stage_ms`): `scene=NAME method=NAME threads=N
+//! stages forces_ms=X shape_ms=X contacts_ms=X one_ring_ms=X per_tet_ms=X advance_ms=X
+//! plasticity_ms=X finish_ms=X`; `--tolerance X` and
 //! `--ring-tet-tolerance X` set the paper's method's `ImpulseSettings` of those names.
 //! Timings are for comparing runs on one machine; the criterion benches (`cargo bench`) time
 //! single steps with statistics.
@@ -218,14 +219,16 @@ fn bench(
         if args.stages {
             let s = clock.mean_stage_ms();
             println!(
-                "scene={name} method={} threads={threads} stages forces_ms={:.3} contacts_ms={:.3} one_ring_ms={:.3} per_tet_ms={:.3} plasticity_ms={:.3} integrate_ms={:.3}",
+                "scene={name} method={} threads={threads} stages forces_ms={:.3} shape_ms={:.3} contacts_ms={:.3} one_ring_ms={:.3} per_tet_ms={:.3} advance_ms={:.3} plasticity_ms={:.3} finish_ms={:.3}",
                 method.name(),
                 s.forces_ms,
+                s.shape_ms,
                 s.contacts_ms,
                 s.one_ring_ms,
                 s.per_tet_ms,
+                s.advance_ms,
                 s.plasticity_ms,
-                s.integrate_ms
+                s.finish_ms
             );
         }
     }

@@ -229,7 +229,7 @@ fn no_file_imports_a_file_that_imports_it_back() {
     let sees =
         |from: &str, to: &str| krate.imports[&krate.src.join(from)].contains(&krate.src.join(to));
     assert!(sees("core/body.rs", "core/tet_mesh.rs"));
-    assert!(sees("plugin/mod.rs", "core/step.rs"));
+    assert!(sees("plugin/mod.rs", "core/substep/mod.rs"));
     for file in &krate.files {
         if let Some(circle) = circle_through(&krate.imports, file) {
             let names: Vec<_> = circle

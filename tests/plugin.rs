@@ -78,40 +78,109 @@ fn free_body_conserves_momentum_with_every_method() {
 
 #[test]
 fn the_step_clock_times_each_stage_that_has_work_within_the_updates() {
-    let mut app = app(Vec3::new(0.0, -9.81, 0.0));
-    app.world_mut()
-        .spawn(SoftBody::new(cube(4), material(VolumeMethod::PAPER_IMPULSES)).unwrap());
-    assert_eq!(
-        app.world().resource::<SoftBodyStepTime>().mean_stage_ms(),
-        SoftBodyStageTimes::default()
-    );
-    let start = std::time::Instant::now();
-    for _ in 0..20 {
-        app.update();
-    }
-    // The clock times the stages as they run, once each: no more than the updates that ran
-    // them took on the wall clock.
-    let updates_ms = start.elapsed().as_secs_f64() * 1e3;
-    let clock = app.world().resource::<SoftBodyStepTime>();
-    assert_eq!(clock.steps, 20);
-    let stages = clock.stages_total;
-    assert!(
-        clock.total_ms <= updates_ms,
-        "the step clock says {} ms, the 20 updates took {updates_ms} ms",
-        clock.total_ms
-    );
-    // The stages that have work take time; the plasticity stage has none without plastic
-    // bodies and returns before it starts its clock.
-    for (name, ms) in [
-        ("forces", stages.forces_ms),
-        ("contacts", stages.contacts_ms),
-        ("one-ring", stages.one_ring_ms),
-        ("per-tet", stages.per_tet_ms),
-        ("integrate", stages.integrate_ms),
+    // The paper's springs (one substep a step) and a preset material (many substeps) on the
+    // ground, so that every substep stage has work.
+    for material in [
+        material(VolumeMethod::PAPER_IMPULSES),
+        SoftBodyMaterial::JELLY,
     ] {
-        assert!(ms > 0.0, "{name}: {ms} ms");
+        let mut app = app(Vec3::new(0.0, -9.81, 0.0));
+        app.world_mut()
+            .spawn((StaticCollider::ground(0.5), Transform::default()));
+        app.world_mut().spawn((
+            SoftBody::new(cube(4), material).unwrap(),
+            Transform::from_xyz(0.0, 0.05, 0.0),
+        ));
+        assert_eq!(
+            app.world().resource::<SoftBodyStepTime>().mean_stage_ms(),
+            SoftBodyStageTimes::default()
+        );
+        let start = std::time::Instant::now();
+        for _ in 0..20 {
+            app.update();
+        }
+        // The clock times the stages as they run, once each: no more than the updates that
+        // ran them took on the wall clock.
+        let updates_ms = start.elapsed().as_secs_f64() * 1e3;
+        let clock = app.world().resource::<SoftBodyStepTime>();
+        assert_eq!(clock.steps, 20);
+        let stages = clock.stages_total;
+        assert!(
+            clock.total_ms <= updates_ms,
+            "the step clock says {} ms, the 20 updates took {updates_ms} ms",
+            clock.total_ms
+        );
+        assert!((stages.sum_ms() - clock.total_ms).abs() < 1e-6 * clock.total_ms.max(1.0));
+        // The stages that have work take time; the plasticity stage has none without plastic
+        // bodies and returns before it starts its clock.
+        for (name, ms) in [
+            ("forces", stages.forces_ms),
+            ("shape", stages.shape_ms),
+            ("contacts", stages.contacts_ms),
+            ("one-ring", stages.one_ring_ms),
+            ("per-tet", stages.per_tet_ms),
+            ("advance", stages.advance_ms),
+            ("finish", stages.finish_ms),
+        ] {
+            assert!(ms > 0.0, "{name}: {ms} ms");
+        }
+        assert_eq!(stages.plasticity_ms, 0.0);
     }
-    assert_eq!(stages.plasticity_ms, 0.0);
+}
+
+/// What a system between two of the plugin's sets saw of the step in the last update.
+#[derive(Resource, Default)]
+struct SeenBetweenSets {
+    /// The body's particles before the step's stages.
+    before: Vec<Vec3>,
+    /// Whether the particles had moved after the substeps, before the finish.
+    moved_after_substeps: bool,
+    /// The body's step count after the substeps (the finish counts the step).
+    steps_after_substeps: u64,
+    /// The body's step count after the finish.
+    steps_after_finish: u64,
+}
+
+#[test]
+fn a_system_between_two_sets_sees_the_first_and_not_the_second() {
+    let mut app = app(Vec3::new(0.0, -9.81, 0.0));
+    app.init_resource::<SeenBetweenSets>();
+    app.add_systems(
+        FixedUpdate,
+        (
+            (|bodies: Query<&SoftBody>, mut seen: ResMut<SeenBetweenSets>| {
+                seen.before = bodies.single().unwrap().state().positions().to_vec();
+            })
+            .after(SoftBodySystems::Prepare)
+            .before(SoftBodySystems::Forces),
+            (|bodies: Query<(&SoftBody, &SoftBodyStats)>, mut seen: ResMut<SeenBetweenSets>| {
+                let (body, stats) = bodies.single().unwrap();
+                seen.moved_after_substeps = body.state().positions() != seen.before.as_slice();
+                seen.steps_after_substeps = stats.steps;
+            })
+            .after(SoftBodySystems::Substeps)
+            .before(SoftBodySystems::Finish),
+            (|stats: Query<&SoftBodyStats>, mut seen: ResMut<SeenBetweenSets>| {
+                seen.steps_after_finish = stats.single().unwrap().steps;
+            })
+            .after(SoftBodySystems::Finish)
+            .before(SoftBodySystems::Writeback),
+        ),
+    );
+    app.world_mut().spawn((
+        SoftBody::new(cube(4), SoftBodyMaterial::JELLY).unwrap(),
+        Transform::from_xyz(0.0, 1.0, 0.0),
+    ));
+    for step in 1..=5 {
+        app.update();
+        let seen = app.world().resource::<SeenBetweenSets>();
+        assert!(
+            seen.moved_after_substeps,
+            "step {step}: the substeps moved nothing"
+        );
+        assert_eq!(seen.steps_after_substeps, step - 1, "step {step}");
+        assert_eq!(seen.steps_after_finish, step, "step {step}");
+    }
 }
 
 #[test]

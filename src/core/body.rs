@@ -1,6 +1,6 @@
 //! The state of one soft body: particles, springs, contacts and the caches of the volume
 //! passes, with what reads and sets them from outside a step (kinematic particles, metrics,
-//! momentum). The stages of a step are in their own files; their order is in `step.rs`.
+//! momentum). The stages of a step are in their own files; their order is in `substep/`.
 
 use std::sync::Arc;
 
@@ -17,7 +17,7 @@ use super::material::{Elasticity, MaterialError, SoftBodyMaterial};
 use super::parallel::{BlockFlags, Parallel, SharedSlice};
 use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
 use super::sleep::{Sleep, SleepSettings};
-use super::soft_records::SubstepPlan;
+use super::substep::plan::{SubstepClock, SubstepPlan};
 use super::tet_mesh::TetMesh;
 
 /// A particle index that does not exist in the body's mesh.
@@ -52,7 +52,8 @@ pub struct VolumeMetrics {
 pub struct SoftBodyState {
     pub(crate) mesh: Arc<TetMesh>,
     pub(crate) positions: Vec<Vec3>,
-    /// Positions at the start of the last step, to interpolate between steps when rendering.
+    /// Positions at the start of the last step: to interpolate between steps when rendering,
+    /// and the strain plasticity flows from (`forces.rs`).
     pub(crate) previous_positions: Vec<Vec3>,
     /// Whether `previous_positions` is where the last step started (not a placement's reset).
     pub(crate) motion_tracked: bool,
@@ -60,7 +61,7 @@ pub struct SoftBodyState {
     pub(crate) met_soft_bodies: bool,
     /// For a body that touched another soft body in the last step, how far its particles
     /// moved in it relative to the body's mean motion (the largest distance): what the
-    /// substeps count as its deformation (see `xpbd.rs`, `substep_speed`). `None` otherwise.
+    /// substeps count as its deformation (see `substep/`, `substep_speed`). `None` otherwise.
     pub(crate) last_relative_motion: Option<f32>,
     pub(crate) velocities: Vec<Vec3>,
     pub(crate) masses: Vec<f32>,
@@ -102,7 +103,7 @@ pub struct SoftBodyState {
     /// The particles with a non-zero entry in `contact_normals`, to clear them cheaply.
     pub(crate) touching: Vec<u32>,
     pub(crate) counters: StepCounters,
-    /// This step's gravity, kept by `apply_forces` for the XPBD substeps.
+    /// This step's gravity, kept by `apply_forces` for the substeps.
     pub(crate) gravity: Vec3,
     /// When the body counts as running away (see `runaway.rs`).
     pub(crate) runaway_limits: RunawayLimits,
@@ -153,11 +154,11 @@ pub(crate) struct StepScratch {
     pub(crate) pass_workers: Vec<PassWorker>,
     /// One per block and phase: whether its job in the running pass is done.
     pub(crate) block_done: BlockFlags,
-    /// Sphere positions saved during an XPBD substep (reused, so steps do not allocate).
+    /// Sphere positions saved during a substep's contacts (reused, so steps do not allocate).
     pub(crate) sphere_positions: Vec<Vec3>,
     /// One per chunk of particles: what each job of the contacts and the integration found.
     pub(crate) chunk_findings: Vec<ChunkFindings>,
-    /// Velocities before a substep's volume impulses (see `xpbd.rs`).
+    /// Velocities before a substep's volume impulses (see `substep/`).
     pub(crate) substep_velocities: Vec<Vec3>,
     /// Per particle, how deep its predicted position was in a static collider in the last
     /// contact pass (zero when it touched none) and the pair's friction: what
@@ -169,8 +170,10 @@ pub(crate) struct StepScratch {
     pub(crate) ring_corrected: Vec<bool>,
     /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
     pub(crate) shape_bundles: Vec<ShapeBundle>,
-    /// This step's substeps while they run in lockstep with other bodies' (`soft_contacts.rs`).
+    /// This step's substeps, from their plan to the step's finish (`substep/`).
     pub(crate) substep_plan: Option<SubstepPlan>,
+    /// The time spent in each stage of the substeps, when the plugin times them.
+    pub(crate) substep_clock: SubstepClock,
     /// The particles the last soft-contact pass touched and their normals (`soft_contacts.rs`).
     pub(crate) soft_touched: Vec<(u32, Vec3)>,
     /// This substep's soft contacts of this body's particles (`soft_contacts.rs`).
@@ -250,6 +253,7 @@ impl SoftBodyState {
                 chunk_findings: ChunkFindings::for_particles(n),
                 ring_corrected: vec![false; n],
                 substep_plan: None,
+                substep_clock: SubstepClock::default(),
                 soft_touched: Vec::new(),
                 soft_supports: Vec::new(),
                 soft_reactions: Vec::new(),
@@ -506,19 +510,14 @@ impl SoftBodyState {
         self.contact_sphere[i] = sphere.map_or(u32::MAX, |k| k as u32);
     }
 
-    /// Stage 6: `x += h v`. A particle whose new position would not be finite (only an unstable
-    /// explicit baseline gets there) keeps its position, loses its velocity and is counted, so
-    /// that one bad particle cannot turn the body, the spheres it touches and the game's
-    /// transforms into NaN. Then a body that runs away is caught and put back (`runaway.rs`).
+    /// `x += h v` for the paper's springs (their substep's advance). A particle whose new
+    /// position would not be finite (only an unstable explicit baseline gets there) keeps its
+    /// position, loses its velocity and is counted, so that one bad particle cannot turn the
+    /// body, the spheres it touches and the game's transforms into NaN.
     ///
     /// The particles are run in chunks by `parallel` (each particle on its own: the same
     /// result on any number of threads).
-    pub fn integrate_positions(&mut self, h: f32, parallel: &dyn Parallel) {
-        if self.material.is_substepped() {
-            // `shape_pass` moved the particles through its substeps already.
-            self.catch_runaway();
-            return;
-        }
+    pub(crate) fn integrate_positions(&mut self, h: f32, parallel: &dyn Parallel) {
         let n = self.positions.len();
         // SAFETY: each job reads and writes only its own chunk's particles.
         let positions = unsafe { SharedSlice::new(&mut self.positions) };
@@ -543,7 +542,6 @@ impl SoftBodyState {
         for found in &mut self.scratch.chunk_findings {
             self.counters.non_finite_velocities += std::mem::take(&mut found.non_finite);
         }
-        self.catch_runaway();
     }
 
     /// Predicted position of particle `i` (valid after `refresh_predicted`, during the volume

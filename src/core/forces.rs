@@ -1,7 +1,7 @@
 //! The forces of a step (the paper's section 3 and its springs): gravity, the springs with
 //! their dampers, the baseline's volume forces, drag; and the plasticity of the springs
 //! (section 6). A physical material has none of these but gravity: its shape is solved in
-//! substeps (`xpbd.rs`, `deviatoric.rs`).
+//! substeps (`substep/`, `deviatoric.rs`).
 
 use glam::Vec3;
 
@@ -29,16 +29,17 @@ impl SoftBodyState {
         }
     }
 
-    /// Stage 1: external, spring and (baseline) volume forces change the velocities.
+    /// [`Stage::Forces`](crate::core::Stage::Forces): external, spring and (baseline) volume
+    /// forces change the velocities.
     ///
     /// The mesh's blocks are run by `parallel`: the same result bit for bit on any number of
     /// threads (see `core::parallel`). Springs (and the
     /// baseline's tets) add their forces block by block in the blocks' order, then each
     /// particle's velocity takes its force, then the dampers act block by block, then drag.
-    pub fn apply_forces(&mut self, h: f32, gravity: Vec3, parallel: &dyn Parallel) {
+    pub(crate) fn apply_forces(&mut self, h: f32, gravity: Vec3, parallel: &dyn Parallel) {
         self.gravity = gravity;
         if self.material.is_substepped() {
-            // Gravity, springs, damping and drag act inside the substeps (`shape_pass`); only
+            // Gravity, springs, damping and drag act inside the substeps (`substep/`); only
             // the kinematic particles are set moving here.
             for &(i, target) in &self.kinematic {
                 let i = i as usize;
@@ -155,8 +156,11 @@ impl SoftBodyState {
         }
     }
 
-    /// Stage 5: plastic flow of the spring rest lengths (no-op without plasticity).
-    pub fn apply_plasticity(&mut self, h: f32) {
+    /// [`Stage::Plasticity`](crate::core::Stage::Plasticity): plastic flow of the spring rest
+    /// lengths (nothing without plasticity), driven by the strain of the positions the step
+    /// started from: the strain the paper's springs' forces saw in the step (they act once, at
+    /// its start), and one definition for every material whatever its substeps.
+    pub(crate) fn apply_plasticity(&mut self, h: f32) {
         let Some(p) = self.material.plasticity else {
             return;
         };
@@ -164,7 +168,8 @@ impl SoftBodyState {
             return;
         }
         for (e, &[i, j]) in self.mesh.edges().iter().enumerate() {
-            let length = self.positions[i as usize].distance(self.positions[j as usize]);
+            let x = &self.previous_positions;
+            let length = x[i as usize].distance(x[j as usize]);
             let rest0 = self.spring_rest0[e];
             let strain = (length - rest0) / rest0;
             let plastic = &mut self.plastic_strain[e];

@@ -25,7 +25,7 @@ pub(crate) mod sleep;
 pub(crate) mod soft_contacts;
 pub(crate) mod soft_lockstep;
 pub(crate) mod soft_records;
-pub(crate) mod step;
+pub(crate) mod substep;
 pub(crate) mod surface_mesh;
 pub(crate) mod tet_mesh;
 pub(crate) mod tetgen;
@@ -51,10 +51,9 @@ pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
 pub use runaway::{Runaway, RunawayLimits};
 pub use sleep::SleepSettings;
-pub use soft_lockstep::{
-    LockstepBody, contact_stage_together, final_contacts_together, step_bodies,
-};
-pub use step::Stage;
+pub use soft_lockstep::step_bodies;
+pub(crate) use soft_lockstep::{LockstepBody, final_contacts_together, substeps_together};
+pub use substep::{Stage, SubstepStage};
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
 pub use tet_mesh::{Blocks, ParticleRegion, TetMesh, TetMeshError};
 pub use tetgen::{TetGenError, TetGenFile, parse_tetgen, write_tetgen};

@@ -165,7 +165,7 @@ struct Pass<'a> {
 
 impl SoftBodyState {
     /// Section 5: the one-ring impulse of every vertex in turn, over a step (or substep) of
-    /// `h`. `spheres` as for [`SoftBodyState::one_ring_pass`]. Does nothing unless the body's
+    /// `h`. `spheres` as for [`SoftBodyState::one_ring_impulses`]. Does nothing unless the body's
     /// method is the paper's with its one-ring pass on.
     pub fn reference_one_ring_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
         let VolumeMethod::Impulses(settings) = self.material.method else {

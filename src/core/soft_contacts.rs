@@ -1,6 +1,6 @@
 //! Contacts between soft bodies, and of a body with itself: the boundary particles of one body
 //! against the boundary triangles of another, two-way. The bodies that may touch run their
-//! contact stage together (`soft_lockstep.rs`); this file is the narrow phase and its passes.
+//! substeps together (`soft_lockstep.rs`); this file is the narrow phase and its passes.
 //!
 //! A particle past a triangle of another body (the nearest one, within reach of it) is pushed
 //! out along the triangle's outward normal, and the triangle's three particles the opposite

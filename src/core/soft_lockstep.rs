@@ -1,6 +1,5 @@
-//! Soft bodies that may touch each other, stepped together: the contact stage of such a group
-//! ([`contact_stage_together`]) runs the substepped bodies' substeps in lockstep, as many as
-//! the most any of them needs, with a two-way soft-contact pass in each (`soft_contacts.rs`),
+//! Soft bodies that may touch each other, stepped together: the substeps of such a group
+//! ([`substeps_together`]) run in lockstep, as many as the most any of them needs, with a two-way soft-contact pass in each (`soft_contacts.rs`),
 //! and hands what each body's volume impulses pushed into another to that body, with friction.
 //! Whether bodies run together is the caller's decision (the plugin's groups of bodies whose
 //! bounds overlap, `plugin/groups.rs`); [`step_bodies`] steps a slice of bodies as the plugin
@@ -15,7 +14,7 @@ use super::colliders::{ColliderInstance, RigidSphereState};
 use super::parallel::{Parallel, Serial, SharedSlice};
 use super::soft_contacts::{SoftContactPhase, soft_contact_pass};
 use super::soft_records::SoftReaction;
-use super::step::Stage;
+use super::substep::{SubstepPlan, SubstepStage};
 
 impl SoftBodyState {
     /// The impulses the other bodies gave this substep's volume impulses: what
@@ -95,18 +94,23 @@ pub(crate) fn apply_soft_reactions<B: DerefMut<Target = SoftBodyState>>(bodies: 
 
 /// A body stepped in lockstep with others, with its own copy of the rigid spheres (which it
 /// pushes as it would alone; the plugin merges every body's pushes after the stage).
-pub struct LockstepBody<'a> {
+pub(crate) struct LockstepBody<'a> {
     /// The body.
-    pub state: &'a mut SoftBodyState,
+    pub(crate) state: &'a mut SoftBodyState,
     /// Its copy of the rigid spheres.
-    pub spheres: &'a mut [RigidSphereState],
+    pub(crate) spheres: &'a mut [RigidSphereState],
     /// The contacts its particles made in the stage (soft, static, spheres, rigid bodies).
-    pub contacts: u32,
+    pub(crate) contacts: u32,
 }
 
 impl<'a> LockstepBody<'a> {
+    /// The body's plan if it runs substep `k`.
+    fn plan_for(&self, k: u32) -> Option<SubstepPlan> {
+        self.state.scratch.substep_plan.filter(|p| k < p.substeps)
+    }
+
     /// `state` with its copy of the spheres, no contacts counted yet.
-    pub fn new(state: &'a mut SoftBodyState, spheres: &'a mut [RigidSphereState]) -> Self {
+    pub(crate) fn new(state: &'a mut SoftBodyState, spheres: &'a mut [RigidSphereState]) -> Self {
         LockstepBody {
             state,
             spheres,
@@ -149,17 +153,16 @@ fn for_each_lockstep(
     parallel.run(count, &|i| job(unsafe { shared.get_mut(i) }));
 }
 
-/// [`Stage::Contacts`] for bodies that may touch each other (the plugin's groups of bodies whose
-/// bounds overlap): a soft-contact pass on the predicted positions `x + h v` (for the paper's
-/// springs, which are not substepped, the only one before their volume passes), each body's
-/// contacts outside substeps, then the substepped bodies' substeps in lockstep, as many as the
-/// most any of them needs. In each substep every body's shape solve runs, then one two-way
-/// soft-contact pass on the predicted positions, then each body's own contacts and volume
-/// impulses, then what those impulses pushed into other bodies is handed to them. The bodies
-/// run one per job of `parallel` (their blocks on one thread each) wherever they do not touch
-/// each other's data, and the contact passes in order, so the result does not depend on it.
-/// Returns the contacts.
-pub fn contact_stage_together(
+/// [`Stage::Substeps`](super::Stage::Substeps) for bodies that may touch each other (the plugin's groups of bodies
+/// whose bounds overlap): a soft-contact pass on the predicted positions `x + h v`, then the
+/// substeps in lockstep, as many as the most any body in substeps needs (the paper's springs
+/// run their one substep with the first). In each substep every body's shape solve runs, then
+/// one two-way soft-contact pass on the predicted positions (when a body is in substeps), then
+/// each body's other substep stages, then what the volume impulses pushed into other bodies is
+/// handed to them. The bodies run one per job of `parallel` (their blocks on one thread each)
+/// wherever they do not touch each other's data, and the contact passes in order, so the
+/// result does not depend on it. Returns the contacts.
+pub(crate) fn substeps_together(
     bodies: &mut [LockstepBody],
     h: f32,
     colliders: &[ColliderInstance],
@@ -168,12 +171,6 @@ pub fn contact_stage_together(
     let counted = |bodies: &[LockstepBody]| bodies.iter().map(|b| b.contacts).sum::<u32>();
     let before = counted(bodies);
     counted_pass(bodies, SoftContactPhase::Predicted(h));
-    for body in bodies.iter_mut() {
-        let b = &mut *body;
-        b.contacts += b
-            .state
-            .resolve_contacts_on(h, b.spheres, colliders, &Serial);
-    }
     // Bodies meeting each other meet at up to the spread of their mean velocities (the
     // diagonal of the box around them): an impact between two bodies is met a fraction of a
     // cell a substep, as a landing on a collider is.
@@ -190,57 +187,61 @@ pub fn contact_stage_together(
     } else {
         0.0
     };
-    let substeps = bodies
+    let most = bodies
         .iter()
         .filter_map(|b| b.state.substeps_needed(h, b.spheres, colliders, approach))
         .max();
-    let Some(substeps) = substeps else {
-        return counted(bodies) - before;
-    };
     for body in bodies.iter_mut() {
-        let plan = body
-            .state
-            .plan_substeps(h, body.spheres, colliders, Some(substeps));
-        body.state.scratch.substep_plan = plan;
+        let b = &mut *body;
+        b.state.plan_substeps(h, b.spheres, colliders, most);
     }
-    for k in 0..substeps {
+    for k in 0..most.unwrap_or(1).max(1) {
         for_each_lockstep(bodies, parallel, &|body| {
-            if let Some(plan) = body.state.scratch.substep_plan {
-                body.state.substep_motion(&plan, k);
+            if let Some(plan) = body.plan_for(k) {
+                body.contacts += body.state.substep_stage(
+                    SubstepStage::Shape,
+                    &plan,
+                    k,
+                    body.spheres,
+                    colliders,
+                    &Serial,
+                );
             }
         });
-        counted_pass(bodies, SoftContactPhase::Substep);
+        if most.is_some() {
+            counted_pass(bodies, SoftContactPhase::Substep);
+        }
         for_each_lockstep(bodies, parallel, &|body| {
-            if let Some(plan) = body.state.scratch.substep_plan {
-                body.state.substep_velocities(&plan);
-                body.contacts += body
-                    .state
-                    .substep_contacts(&plan, k, body.spheres, colliders);
-                body.state.substep_finish(&plan, body.spheres, &Serial);
+            if let Some(plan) = body.plan_for(k) {
+                for stage in &SubstepStage::ORDER[1..] {
+                    body.contacts += body.state.substep_stage(
+                        *stage,
+                        &plan,
+                        k,
+                        body.spheres,
+                        colliders,
+                        &Serial,
+                    );
+                }
             }
         });
         apply_soft_reactions(bodies);
     }
-    for body in bodies.iter_mut() {
-        if body.state.scratch.substep_plan.take().is_some() {
-            body.state.update_sleep(h, body.spheres, colliders);
-        }
-    }
     counted(bodies) - before
 }
 
-/// The soft-contact pass that ends a step of bodies stepped together (after
-/// [`Stage::Integrate`]): on the positions the step ended at, moving penetrating particles
-/// apart and stopping their approach, so that no particle ends a step inside another body.
-/// Returns the contacts.
-pub fn final_contacts_together(bodies: &mut [LockstepBody]) -> u32 {
+/// The soft-contact pass that ends a step of bodies stepped together (the last part of
+/// [`Stage::Finish`](super::Stage::Finish)): on the positions the step ended at, moving penetrating particles apart
+/// and stopping their approach, so that no particle ends a step inside another body. Returns
+/// the contacts.
+pub(crate) fn final_contacts_together(bodies: &mut [LockstepBody]) -> u32 {
     counted_pass(bodies, SoftContactPhase::Final)
 }
 
-/// A whole step of several bodies that meet each other, in the plugin's order: the contact
-/// stage together ([`contact_stage_together`]), each body's other stages ([`Stage::ORDER`]),
-/// and the final pass ([`final_contacts_together`]). For using the core without Bevy, and
-/// for tests and benchmarks of piles.
+/// A whole step of several bodies that meet each other, in the plugin's order
+/// ([`Stage::ORDER`](super::Stage::ORDER)): each body's forces, the substeps together ([`substeps_together`]), each
+/// body's plasticity and finish, then the final soft-contact pass. For using the core without
+/// Bevy, and for tests and benchmarks of piles. Returns the contacts.
 pub fn step_bodies(
     bodies: &mut [SoftBodyState],
     h: f32,
@@ -252,24 +253,16 @@ pub fn step_bodies(
         .iter_mut()
         .map(|state| LockstepBody::new(state, &mut []))
         .collect();
-    let mut contacts = 0;
     for body in bodies.iter_mut() {
         body.state.begin_step();
+        body.state.apply_forces(h, gravity, &Serial);
     }
-    for stage in Stage::ORDER {
-        if stage == Stage::Contacts {
-            contacts += contact_stage_together(&mut bodies, h, colliders, parallel);
-            continue;
-        }
-        for body in bodies.iter_mut() {
-            contacts += body
-                .state
-                .run_stage(stage, h, gravity, &mut [], colliders, &Serial);
-        }
-        if stage == Stage::Integrate {
-            contacts += final_contacts_together(&mut bodies);
-        }
+    let mut contacts = substeps_together(&mut bodies, h, colliders, parallel);
+    for body in bodies.iter_mut() {
+        body.state.apply_plasticity(h);
+        body.state.finish_step(h, &[], colliders);
     }
+    contacts += final_contacts_together(&mut bodies);
     contacts
 }
 

@@ -1,27 +1,9 @@
-//! What a body remembers within a step run together with other soft bodies: its substeps'
-//! plan ([`SubstepPlan`], `xpbd.rs`), the contacts its volume impulses may push into
-//! ([`SoftSupport`]), the impulses it hands to the other bodies ([`SoftReaction`]), and where
-//! static friction holds each particle ([`SoftAnchor`]). Plain records, kept in the body's
+//! What a body remembers within a step run together with other soft bodies: the contacts its
+//! volume impulses may push into ([`SoftSupport`]), the impulses it hands to the other bodies
+//! ([`SoftReaction`]), and where static friction holds each particle ([`SoftAnchor`]). Plain records, kept in the body's
 //! scratch (`soft_contacts.rs` writes them, `soft_lockstep.rs` reads them).
 
 use glam::Vec3;
-
-/// How a body's substeps run in one step (see `SoftBodyState::plan_substeps`).
-#[derive(Clone, Copy, Debug)]
-pub(crate) struct SubstepPlan {
-    /// How many.
-    pub(crate) substeps: u32,
-    /// Their length.
-    pub(crate) hs: f32,
-    /// XPBD: the tets' volumes are projected in the shape solve, no volume impulses.
-    pub(crate) volumes: bool,
-    /// The shape projection's damping term (physical materials).
-    pub(crate) shape_damping: f32,
-    /// Whether the paper's spring dampers act on the velocities.
-    pub(crate) dampers: bool,
-    /// The tets' shape compliances, for a physical material under the impulses.
-    pub(crate) tet_compliance: Option<[f32; 2]>,
-}
 
 /// A particle's contact with another body's triangle in a substep: where the volume impulses'
 /// pushes into that body are handed.

@@ -1,15 +1,15 @@
 //! Soft bodies that may touch each other are stepped together: in each step the bodies whose
 //! bounds (where they are, where they are headed, and a gap) overlap are joined into groups,
-//! and the contact stage of a group runs the core's `contact_stage_together` (substeps in
-//! lockstep, two-way soft contacts), its final pass after integration. A body in no group runs
+//! and the substeps of a group run in the core's `substeps_together` (in lockstep, two-way
+//! soft contacts), its final pass at the step's finish. A body in no group runs
 //! alone, as before. Groups run one after another, each group's bodies one per thread.
 
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::*;
-use crate::core::{LockstepBody, contact_stage_together, final_contacts_together};
+use crate::core::{LockstepBody, final_contacts_together, substeps_together};
 
-/// This step's groups of soft bodies stepped together, found in the contact stage and kept
+/// This step's groups of soft bodies stepped together, found in the substeps' stage and kept
 /// for the final pass. Scratch arrays are kept between steps.
 #[derive(Resource, Default)]
 pub(super) struct SoftContactGroups {
@@ -114,10 +114,10 @@ pub(super) fn find_groups(
     }
 }
 
-/// The contact stage of every group: each body against its own copy of the spheres and rigid
+/// The substeps of every group: each body against its own copy of the spheres and rigid
 /// bodies as they were before the stage, the group's changes to them merged as differences
 /// after it (as `par_with_spheres` does for the bodies run alone).
-pub(super) fn contact_stage_of_groups(
+pub(super) fn substeps_of_groups(
     bodies: &mut Bodies,
     groups: &SoftContactGroups,
     solver: &mut SolverSpheres,
@@ -149,7 +149,7 @@ pub(super) fn contact_stage_of_groups(
                 LockstepBody::new(&mut body.state, &mut body.spheres)
             })
             .collect();
-        contact_stage_together(&mut lockstep, h, &solver.colliders, compute);
+        substeps_together(&mut lockstep, h, &solver.colliders, compute);
         let counts: Vec<u32> = lockstep.iter().map(|b| b.contacts).collect();
         drop(lockstep);
         let share = start.elapsed() / group.len() as u32;
@@ -169,12 +169,12 @@ pub(super) fn contact_stage_of_groups(
     }
 }
 
-/// The final soft-contact pass of every group, after the bodies' integration.
+/// The final soft-contact pass of every group, at the step's finish.
 pub(super) fn final_pass_of_groups(bodies: &mut Bodies, groups: &SoftContactGroups) {
     for group in groups.groups() {
         let mut members: Vec<(Mut<SoftBody>, Mut<SoftBodyStats>)> = Vec::with_capacity(group.len());
         for &entity in group {
-            // SAFETY: as in `contact_stage_of_groups`.
+            // SAFETY: as in `substeps_of_groups`.
             if let Ok((_, body, stats)) = unsafe { bodies.get_unchecked(entity) } {
                 members.push((body, stats));
             }

@@ -14,11 +14,12 @@ use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
     SoftBodyGravity, SoftBodyStats, StaticCollider,
 };
-use crate::core::step::{Stage, spheres_after_bodies, spheres_before_bodies};
+use crate::core::substep::{spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
     ColliderInstance, CollisionFilter, Parallel, RigidBodyMotion, RigidSphereState, Serial,
     SoftBodyState, TetMesh,
 };
+use crate::core::{Stage, SubstepStage};
 
 mod groups;
 mod systems;
@@ -36,28 +37,26 @@ pub use threads::{PARALLEL_PASS_MIN_TETS, SoftBodyThreads};
 pub use timing::{SoftBodyStageTimes, SoftBodyStepTime};
 
 /// The plugin's system sets, chained in this order: preparing, the stages of a step in the
-/// core's order ([`Stage::ORDER`]; see `core::step` for what each does and why in this order),
-/// writing back. A game puts its own systems between them.
+/// core's order ([`Stage::ORDER`]; `core/substep/` says what each does and why in this
+/// order), writing back. A game puts its own systems between them. The stages of a substep
+/// ([`SubstepStage::ORDER`]) run inside [`SoftBodySystems::Substeps`], body by body (as
+/// avian's substeps run inside its solver set); [`SoftBodyStepTime`] books each of them.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SoftBodySystems {
     /// Place new bodies, clear last step's counters, apply pinned and driven particles, gather
     /// the rigid spheres and static colliders.
     Prepare,
-    /// [`Stage::Forces`]: gravity, the paper's springs with damping, baseline volume forces;
-    /// the spheres' gravity.
+    /// [`Stage::Forces`]: the paper's springs with damping, gravity and the baseline's volume
+    /// forces for bodies in one substep; kinematic particles set moving; the spheres' gravity.
     Forces,
-    /// [`Stage::Contacts`]: contacts on the predicted positions, so the volume passes see them;
-    /// a shape solved in substeps (a physical material's, XPBD's whole step) is solved here,
-    /// meeting the contacts in each substep.
-    Contacts,
-    /// [`Stage::OneRing`]: the one-ring volume impulses.
-    OneRing,
-    /// [`Stage::PerTet`]: the per-tet correction scaled by gamma.
-    PerTet,
+    /// [`Stage::Substeps`]: every body's substeps (shape, contacts, one-ring and per-tet
+    /// impulses, `x += h_s v`); bodies that may touch each other in lockstep.
+    Substeps,
     /// [`Stage::Plasticity`]: plastic springs.
     Plasticity,
-    /// [`Stage::Integrate`]: a last contact pass, then `x += h v` for particles and spheres.
-    Integrate,
+    /// [`Stage::Finish`]: the spheres' last contacts and motion, each body's sleep and runaway
+    /// check, the last soft-contact pass of bodies stepped together.
+    Finish,
     /// The spheres' components follow the solver, metrics go into [`SoftBodyStats`], the
     /// bodies' transforms follow the bodies.
     Writeback,
@@ -67,11 +66,9 @@ impl From<Stage> for SoftBodySystems {
     fn from(stage: Stage) -> Self {
         match stage {
             Stage::Forces => SoftBodySystems::Forces,
-            Stage::Contacts => SoftBodySystems::Contacts,
-            Stage::OneRing => SoftBodySystems::OneRing,
-            Stage::PerTet => SoftBodySystems::PerTet,
+            Stage::Substeps => SoftBodySystems::Substeps,
             Stage::Plasticity => SoftBodySystems::Plasticity,
-            Stage::Integrate => SoftBodySystems::Integrate,
+            Stage::Finish => SoftBodySystems::Finish,
         }
     }
 }
@@ -157,12 +154,15 @@ impl Plugin for SoftBodyPlugin {
                 .chain()
                 .in_set(SoftBodySystems::Prepare),
         );
-        for stage in Stage::ORDER {
-            app.add_systems(
-                self.schedule,
-                stage_system(stage).in_set(SoftBodySystems::from(stage)),
-            );
-        }
+        app.add_systems(
+            self.schedule,
+            (
+                forces.in_set(SoftBodySystems::Forces),
+                substeps.in_set(SoftBodySystems::Substeps),
+                plasticity.in_set(SoftBodySystems::Plasticity),
+                finish.in_set(SoftBodySystems::Finish),
+            ),
+        );
         app.add_systems(
             self.schedule,
             (finish_step, writeback)

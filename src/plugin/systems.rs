@@ -1,5 +1,5 @@
-//! The plugin's systems: one per stage of a step, each running the core's stage on every
-//! body, and the conversions between the ECS and the core.
+//! The plugin's systems: one per stage of a step ([`Stage::ORDER`]), each running the core's
+//! stage on every body, and the conversions between the ECS and the core.
 
 use super::*;
 
@@ -79,6 +79,7 @@ pub(super) fn prepare(
             body.state
                 .map_positions(|p| placement.rotation * p + placement.translation);
             body.placed = true;
+            body.state.time_substeps(true);
             *transform = Transform::from_translation(body.state.centre_of_mass());
         }
         body.step_time = Duration::ZERO;
@@ -206,71 +207,118 @@ pub(crate) fn gather_spheres(
     }
 }
 
-/// The system of `stage`: the spheres' part before the bodies', every body's part in parallel
-/// (one body per job; a large body's blocks in parallel too when there are fewer bodies than
-/// threads), the spheres' part after, timed as the stage. The stages' order is the core's
-/// ([`Stage::ORDER`]); the plugin chains their sets in it.
-#[allow(clippy::type_complexity)]
-pub(super) fn stage_system(
-    stage: Stage,
-) -> impl FnMut(
-    Res<Time>,
-    Res<SoftBodyGravity>,
-    ResMut<SolverSpheres>,
-    ResMut<SoftBodyStepTime>,
-    Bodies,
-    Res<SoftBodyThreads>,
-    ResMut<SoftContactGroups>,
-) {
-    move |time, gravity, mut solver, mut clock, mut bodies, threads, mut groups| {
-        let h = time.delta_secs();
-        if h <= 0.0 {
-            return;
-        }
-        // A stage no body has work in costs no parallel section (waking threads for nothing),
-        // and without spheres nothing at all.
-        let bodies_work = bodies
-            .iter()
-            .any(|(_, body, _)| body.state.has_work_in(stage));
-        if !bodies_work && solver.states.is_empty() {
-            return;
-        }
-        let start = Instant::now();
-        let g = gravity.0;
-        let solver = &mut *solver;
-        spheres_before_bodies(stage, h, g, &mut solver.states, &solver.colliders);
-        if bodies_work {
-            let compute = ComputePool::new(&threads);
-            let few = few_bodies(&bodies, &compute);
-            // Bodies that may touch each other run their contact stage together.
-            let together = stage == Stage::Contacts;
-            if together {
-                find_groups(&mut bodies, h, g, &mut groups);
-                contact_stage_of_groups(&mut bodies, &groups, solver, &compute, h);
-            }
-            par_with_spheres(
-                &mut bodies,
-                solver,
-                &compute,
-                together,
-                |s, stats, spheres, colliders| {
-                    let parallel = pass_parallelism(few, s, &compute);
-                    if stage == Stage::ORDER[0] {
-                        stats.contacts = 0;
-                    }
-                    stats.contacts += s.run_stage(stage, h, g, spheres, colliders, parallel);
-                    if stage == Stage::Integrate {
-                        stats.steps += 1;
-                    }
-                },
-            );
-            if stage == Stage::Integrate {
-                final_pass_of_groups(&mut bodies, &groups);
-            }
-        }
-        spheres_after_bodies(stage, h, &mut solver.states);
-        clock.add_stage(start, stage);
+/// The resources every stage's system reads and writes.
+#[derive(bevy::ecs::system::SystemParam)]
+pub(super) struct StageParams<'w> {
+    time: Res<'w, Time>,
+    gravity: Res<'w, SoftBodyGravity>,
+    solver: ResMut<'w, SolverSpheres>,
+    clock: ResMut<'w, SoftBodyStepTime>,
+    threads: Res<'w, SoftBodyThreads>,
+}
+
+impl StageParams<'_> {
+    /// The step's length, `None` when no time passed (no step).
+    fn step(&self) -> Option<f32> {
+        let h = self.time.delta_secs();
+        (h > 0.0).then_some(h)
     }
+}
+
+/// [`SoftBodySystems::Forces`]: the spheres' gravity, then every body's forces in parallel
+/// (one body per job; a large body's blocks in parallel too when there are fewer bodies than
+/// threads).
+pub(super) fn forces(mut p: StageParams, mut bodies: Bodies) {
+    let Some(h) = p.step() else { return };
+    let start = Instant::now();
+    let g = p.gravity.0;
+    let solver = &mut *p.solver;
+    spheres_before_bodies(Stage::Forces, h, g, &mut solver.states, &solver.colliders);
+    let compute = ComputePool::new(&p.threads);
+    let few = few_bodies(&bodies, &compute);
+    par_with_spheres(&mut bodies, solver, &compute, false, |s, stats, _, _| {
+        stats.contacts = 0;
+        s.apply_forces(h, g, pass_parallelism(few, s, &compute));
+    });
+    p.clock.add_stage(start, Stage::Forces);
+}
+
+/// [`SoftBodySystems::Substeps`]: the spheres meet the static colliders, the bodies that may
+/// touch each other run their substeps together (group after group), every other body its
+/// own, in parallel. The wall-clock time is booked to the substep stages in the proportion
+/// the bodies spent in each.
+pub(super) fn substeps(
+    mut p: StageParams,
+    mut bodies: Bodies,
+    mut groups: ResMut<SoftContactGroups>,
+) {
+    let Some(h) = p.step() else { return };
+    let start = Instant::now();
+    let g = p.gravity.0;
+    let solver = &mut *p.solver;
+    spheres_before_bodies(Stage::Substeps, h, g, &mut solver.states, &solver.colliders);
+    let compute = ComputePool::new(&p.threads);
+    let few = few_bodies(&bodies, &compute);
+    find_groups(&mut bodies, h, g, &mut groups);
+    substeps_of_groups(&mut bodies, &groups, solver, &compute, h);
+    par_with_spheres(
+        &mut bodies,
+        solver,
+        &compute,
+        true,
+        |s, stats, spheres, colliders| {
+            let parallel = pass_parallelism(few, s, &compute);
+            stats.contacts += s.run_substeps(h, spheres, colliders, parallel);
+        },
+    );
+    let mut seconds = [0.0; 5];
+    for (_, mut body, _) in bodies.iter_mut() {
+        let taken = body.state.take_substep_seconds();
+        for (total, s) in seconds.iter_mut().zip(taken) {
+            *total += s;
+        }
+    }
+    p.clock.add_substeps(start, seconds);
+}
+
+/// [`SoftBodySystems::Plasticity`]: the plastic bodies' flow; nothing (and no time) without
+/// plastic bodies.
+pub(super) fn plasticity(mut p: StageParams, mut bodies: Bodies) {
+    let Some(h) = p.step() else { return };
+    let plastic = |body: &SoftBody| body.state.material().plasticity.is_some();
+    if !bodies.iter().any(|(_, body, _)| plastic(body)) {
+        return;
+    }
+    let start = Instant::now();
+    let compute = ComputePool::new(&p.threads);
+    par_with_spheres(&mut bodies, &mut p.solver, &compute, false, |s, _, _, _| {
+        s.apply_plasticity(h);
+    });
+    p.clock.add_stage(start, Stage::Plasticity);
+}
+
+/// [`SoftBodySystems::Finish`]: the spheres meet the static colliders, each body's sleep and
+/// runaway check, the last soft-contact pass of the bodies stepped together, the spheres move.
+pub(super) fn finish(mut p: StageParams, mut bodies: Bodies, groups: Res<SoftContactGroups>) {
+    let Some(h) = p.step() else { return };
+    let start = Instant::now();
+    let g = p.gravity.0;
+    let solver = &mut *p.solver;
+    spheres_before_bodies(Stage::Finish, h, g, &mut solver.states, &solver.colliders);
+    let compute = ComputePool::new(&p.threads);
+    par_with_spheres(
+        &mut bodies,
+        solver,
+        &compute,
+        false,
+        |s, stats, spheres, colliders| {
+            s.finish_step(h, spheres, colliders);
+            stats.steps += 1;
+        },
+    );
+    final_pass_of_groups(&mut bodies, &groups);
+    spheres_after_bodies(Stage::Finish, h, &mut solver.states);
+    p.clock.add_stage(start, Stage::Finish);
 }
 
 /// Ends a step: the spheres' components follow the solver's spheres, the step's time is

@@ -8,26 +8,14 @@ use crate::core::Blocks;
 use crate::core::body::SoftBodyState;
 
 impl SoftBodyState {
-    /// Stage 3: one impulse per vertex restoring the volume of its one-ring (section 5).
-    /// Does nothing for the baseline or when the one-ring switch is off.
+    /// [`SubstepStage::OneRing`](crate::core::SubstepStage::OneRing): one impulse per vertex
+    /// restoring the volume of its one-ring (section 5), on the predicted positions `x + h v`
+    /// of a substep of `h`. Nothing for the baseline or when the one-ring switch is off.
     /// `spheres` are the rigid spheres of the last contact pass, in the same order: particles
     /// pressed against one move it along.
     ///
     /// The mesh's blocks are run by `parallel`: the same result bit for bit on any number of
     /// threads (see `core::parallel`).
-    pub fn one_ring_pass(
-        &mut self,
-        h: f32,
-        spheres: &mut [RigidSphereState],
-        parallel: &dyn Parallel,
-    ) {
-        // A body stepped in substeps has its impulses in every substep (`shape_pass`).
-        if !self.material.is_substepped() {
-            self.one_ring_impulses(h, spheres, parallel);
-        }
-    }
-
-    /// The one-ring pass over a step (or substep) of `h`.
     pub(crate) fn one_ring_impulses(
         &mut self,
         h: f32,
@@ -63,23 +51,10 @@ impl SoftBodyState {
         );
     }
 
-    /// Stage 4: one impulse per tet towards its own rest volume, scaled by `gamma` (section 4,
-    /// end of section 5). Does nothing for the baseline or when the per-tet switch is off.
-    /// `spheres` as for [`SoftBodyState::one_ring_pass`].
-    ///
-    /// The mesh's blocks are run by `parallel`, as in [`SoftBodyState::one_ring_pass`].
-    pub fn per_tet_pass(
-        &mut self,
-        h: f32,
-        spheres: &mut [RigidSphereState],
-        parallel: &dyn Parallel,
-    ) {
-        if !self.material.is_substepped() {
-            self.per_tet_impulses(h, spheres, parallel);
-        }
-    }
-
-    /// The per-tet pass over a step (or substep) of `h`.
+    /// [`SubstepStage::PerTet`](crate::core::SubstepStage::PerTet): one impulse per tet towards
+    /// its own rest volume, scaled by `gamma` (section 4, end of section 5). Nothing for the
+    /// baseline or when the per-tet switch is off. `spheres` and `parallel` as for
+    /// [`SoftBodyState::one_ring_impulses`].
     pub(crate) fn per_tet_impulses(
         &mut self,
         h: f32,

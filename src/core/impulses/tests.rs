@@ -196,10 +196,10 @@ fn passes_keep_every_tet_above_its_floor_with_the_fast_clamp() {
             }
         };
         let before = above(&body);
-        body.one_ring_pass(H, &mut [], &Serial);
+        body.one_ring_impulses(H, &mut [], &Serial);
         check(&body, &before, "ring");
         let before = above(&body);
-        body.per_tet_pass(H, &mut [], &Serial);
+        body.per_tet_impulses(H, &mut [], &Serial);
         check(&body, &before, "per-tet");
         let c = body.counters();
         if strength < 0.1 {
@@ -309,11 +309,11 @@ fn safe_radius_is_within_the_slack_and_close_to_it() {
 /// changed in between must count in its drifts.
 fn passes_with_a_push_between(body: &mut SoftBodyState, every: usize, strength: f32) {
     body.begin_step();
-    body.one_ring_pass(H, &mut [], &Serial);
+    body.one_ring_impulses(H, &mut [], &Serial);
     for v in body.velocities.iter_mut().step_by(every) {
         *v += Vec3::new(0.3, -1.0, 0.2) * strength;
     }
-    body.per_tet_pass(H, &mut [], &Serial);
+    body.per_tet_impulses(H, &mut [], &Serial);
 }
 
 /// Whether a ring was past its tolerance when last checked only decides how its next
@@ -403,8 +403,8 @@ fn one_ring_passes_going_on_from_earlier_steps_bounds_change_nothing() {
         for step in 0..8 {
             for body in [&mut fast, &mut exact, &mut by_rule] {
                 body.begin_step();
-                body.one_ring_pass(H, &mut [], &Serial);
-                body.per_tet_pass(H, &mut [], &Serial);
+                body.one_ring_impulses(H, &mut [], &Serial);
+                body.per_tet_impulses(H, &mut [], &Serial);
                 body.integrate_positions(H, &Serial);
                 if step % 4 == 3 {
                     for v in body.velocities.iter_mut().step_by(5) {
@@ -451,8 +451,8 @@ fn a_body_moving_as_a_whole_goes_on_from_its_bounds() {
     for step in 0..8 {
         for body in [&mut by_rule, &mut exact] {
             body.begin_step();
-            body.one_ring_pass(H, &mut [], &Serial);
-            body.per_tet_pass(H, &mut [], &Serial);
+            body.one_ring_impulses(H, &mut [], &Serial);
+            body.per_tet_impulses(H, &mut [], &Serial);
             body.integrate_positions(H, &Serial);
         }
         assert_eq!(by_rule.velocities, exact.velocities, "step {step}");
@@ -498,8 +498,8 @@ fn rings_known_within_their_tolerances_change_nothing() {
                         *v += kick;
                     }
                 }
-                body.one_ring_pass(H, &mut [], &Serial);
-                body.per_tet_pass(H, &mut [], &Serial);
+                body.one_ring_impulses(H, &mut [], &Serial);
+                body.per_tet_impulses(H, &mut [], &Serial);
                 body.integrate_positions(H, &Serial);
             }
             assert_eq!(
@@ -547,8 +547,8 @@ fn ring_checks_are_ready_only_once_computed_for_their_bounds() {
             (body.positions, body.velocities) = first.clone();
         }
         let carried_before = body.scratch.clamp_bounds.carried_passes;
-        body.one_ring_pass(H, &mut [], &Serial);
-        body.per_tet_pass(H, &mut [], &Serial);
+        body.one_ring_impulses(H, &mut [], &Serial);
+        body.per_tet_impulses(H, &mut [], &Serial);
         body.integrate_positions(H, &Serial);
         let carried = body.scratch.clamp_bounds.carried_passes > carried_before;
         assert!(
@@ -629,11 +629,11 @@ fn impulses_near_a_far_drift_are_clamped_as_without_bounds() {
         exact.scratch.clamp_bounds.disabled = true;
         for body in [&mut fast, &mut exact] {
             body.begin_step();
-            body.one_ring_pass(H, &mut [], &Serial);
+            body.one_ring_impulses(H, &mut [], &Serial);
             if between_passes {
                 body.velocities[thrown] += throw;
             }
-            body.per_tet_pass(H, &mut [], &Serial);
+            body.per_tet_impulses(H, &mut [], &Serial);
         }
         assert_eq!(fast.velocities, exact.velocities, "throw {throw}");
         let (f, e) = (fast.counters(), exact.counters());
@@ -723,8 +723,8 @@ fn tolerance_skips_small_errors_and_only_those() {
     let error = largest_error(&gentle);
     assert!(error > 0.0 && error < tolerance, "{error}");
     let before = gentle.velocities().to_vec();
-    gentle.one_ring_pass(H, &mut [], &Serial);
-    gentle.per_tet_pass(H, &mut [], &Serial);
+    gentle.one_ring_impulses(H, &mut [], &Serial);
+    gentle.per_tet_impulses(H, &mut [], &Serial);
     assert_eq!(
         gentle.velocities(),
         &before[..],
@@ -733,7 +733,7 @@ fn tolerance_skips_small_errors_and_only_those() {
 
     // The same body with no tolerance is corrected.
     use_impulses(&mut gentle, exact(0.125, true));
-    gentle.one_ring_pass(H, &mut [], &Serial);
+    gentle.one_ring_impulses(H, &mut [], &Serial);
     assert_ne!(gentle.velocities(), &before[..]);
 
     // The per-tet pass skips a tet whose correction, gamma times its error, is within the
@@ -749,7 +749,7 @@ fn tolerance_skips_small_errors_and_only_those() {
         };
         use_impulses(&mut body, per_tet_only);
         let before = body.velocities().to_vec();
-        body.per_tet_pass(H, &mut [], &Serial);
+        body.per_tet_impulses(H, &mut [], &Serial);
         assert_eq!(body.velocities() != &before[..], corrected, "gamma {gamma}");
     }
 
@@ -757,8 +757,8 @@ fn tolerance_skips_small_errors_and_only_those() {
     let mut shaken = shaken_body(0.05);
     assert!(largest_error(&shaken) > tolerance);
     let before = shaken.velocities().to_vec();
-    shaken.one_ring_pass(H, &mut [], &Serial);
-    shaken.per_tet_pass(H, &mut [], &Serial);
+    shaken.one_ring_impulses(H, &mut [], &Serial);
+    shaken.per_tet_impulses(H, &mut [], &Serial);
     assert_ne!(shaken.velocities(), &before[..]);
     assert!(largest_error(&shaken) < largest_error(&shaken_body(0.05)));
 }

@@ -1,0 +1,567 @@
+//! The step of a soft body, written once: the core's whole-step functions
+//! ([`SoftBodyState::step_with_contacts`], `soft_lockstep::step_bodies`) and the plugin's
+//! systems run these stages in this order.
+//!
+//! A step ([`Stage::ORDER`]) is:
+//! 1. [`Stage::Forces`]: the paper's section 3 for its explicit springs (gravity, springs with
+//!    dampers, the baseline's volume forces, drag change the velocities); for a physical
+//!    material or XPBD, whose gravity and shape act in the substeps, only the kinematic
+//!    particles are set moving. The rigid spheres get their gravity.
+//! 2. [`Stage::Substeps`]: `N` substeps of [`SubstepStage::ORDER`], `N` from the body's motion
+//!    for a physical material ([`SoftBodyState::plan_substeps`]), XPBD's own count, and one
+//!    substep of the whole step for the paper's springs. The spheres meet the static colliders
+//!    before the substeps.
+//! 3. [`Stage::Plasticity`]: the plastic springs' flow (section 6), on the positions the
+//!    substeps ended at.
+//! 4. [`Stage::Finish`]: the spheres meet the static colliders again and move; each body's
+//!    sleep is updated and a body that ran away is caught (`runaway.rs`); bodies stepped
+//!    together get a last soft-contact pass.
+//!
+//! A substep ([`SubstepStage::ORDER`]) of length `h_s` is:
+//! 1. [`SubstepStage::Shape`]: gravity, the predicted positions and the shape solve (the tets'
+//!    shapes of `deviatoric.rs`, the edges, or XPBD's edges and volumes). Nothing for the
+//!    paper's springs, whose forces the step's first stage applied.
+//! 2. [`SubstepStage::Contacts`]: the velocities the shape solve gives, then the contacts with
+//!    the spheres, the rigid bodies of another engine and the static colliders (last, so that
+//!    no particle is left inside the ground by a body pushing it). Bodies stepped together
+//!    meet each other between the shape solve and this stage (`soft_lockstep.rs`).
+//! 3. [`SubstepStage::OneRing`] (section 5): damping, then one impulse per vertex restoring
+//!    its one-ring's volume on the predicted positions `x + h_s v`.
+//! 4. [`SubstepStage::PerTet`] (sections 4 and 5): one impulse per tet scaled by gamma, with
+//!    the neighbour clamp.
+//! 5. [`SubstepStage::Advance`]: `x += h_s v`, the volume impulses' velocity change kept as
+//!    far as it adds no energy, friction for what the supports pushed back; for the paper's
+//!    springs a contact pass first (undoing what the volume impulses pushed into a collider).
+
+use glam::Vec3;
+
+use super::body::SoftBodyState;
+use super::colliders::{ColliderInstance, RigidSphereState};
+use super::deviatoric::{project_tet_shapes, refresh_shape_bundles};
+use super::lanes::Point4;
+use super::material::{Elasticity, VolumeMethod};
+use super::parallel::{Parallel, Serial};
+
+pub(crate) mod plan;
+pub(crate) use plan::SubstepPlan;
+
+/// A stage of a step, in the order [`Stage::ORDER`]; see the module's documentation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Stage {
+    /// The explicit springs' forces and gravity; kinematic particles set moving.
+    Forces,
+    /// The substeps: shape, contacts, the volume passes, `x += h_s v`.
+    Substeps,
+    /// The plastic springs' flow.
+    Plasticity,
+    /// Sleep, the runaway check, the spheres' last contacts and motion.
+    Finish,
+}
+
+impl Stage {
+    /// The stages in the order a step runs them.
+    pub const ORDER: [Stage; 4] = [
+        Stage::Forces,
+        Stage::Substeps,
+        Stage::Plasticity,
+        Stage::Finish,
+    ];
+}
+
+/// A stage of a substep, in the order [`SubstepStage::ORDER`]; see the module's documentation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum SubstepStage {
+    /// Gravity, the predicted positions, the shape solve.
+    Shape,
+    /// The velocities from the shape solve, then the contacts.
+    Contacts,
+    /// Damping, then the one-ring volume impulses (section 5).
+    OneRing,
+    /// The per-tet volume impulses scaled by gamma, with the neighbour clamp (section 4).
+    PerTet,
+    /// `x += h_s v`.
+    Advance,
+}
+
+impl SubstepStage {
+    /// The stages in the order a substep runs them.
+    pub const ORDER: [SubstepStage; 5] = [
+        SubstepStage::Shape,
+        SubstepStage::Contacts,
+        SubstepStage::OneRing,
+        SubstepStage::PerTet,
+        SubstepStage::Advance,
+    ];
+}
+
+impl SoftBodyState {
+    /// A whole step without colliders or spheres: for tests and benchmarks of the core.
+    pub fn step_free(&mut self, h: f32, gravity: Vec3) {
+        self.step_with_contacts(h, gravity, &mut [], &[], &Serial);
+    }
+
+    /// A whole step of this body among `spheres` and `colliders`, exactly as the plugin runs it
+    /// for one body: for using the core without Bevy, and for benchmarks of what the plugin
+    /// does per body.
+    ///
+    /// The body's blocks are run by `parallel` (`Serial`, or the plugin's threads): the same
+    /// result bit for bit on any number of threads.
+    pub fn step_with_contacts(
+        &mut self,
+        h: f32,
+        gravity: Vec3,
+        spheres: &mut [RigidSphereState],
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) {
+        self.begin_step();
+        spheres_before_bodies(Stage::Forces, h, gravity, spheres, colliders);
+        self.apply_forces(h, gravity, parallel);
+        spheres_before_bodies(Stage::Substeps, h, gravity, spheres, colliders);
+        self.run_substeps(h, spheres, colliders, parallel);
+        self.apply_plasticity(h);
+        spheres_before_bodies(Stage::Finish, h, gravity, spheres, colliders);
+        self.finish_step(h, spheres, colliders);
+        spheres_after_bodies(Stage::Finish, h, spheres);
+    }
+
+    /// [`Stage::Substeps`] for a body stepped alone. Returns the contacts it resolved.
+    pub(crate) fn run_substeps(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) -> u32 {
+        let Some(plan) = self.plan_substeps(h, spheres, colliders, None) else {
+            return 0;
+        };
+        let mut contacts = 0;
+        for k in 0..plan.substeps {
+            for stage in SubstepStage::ORDER {
+                contacts += self.substep_stage(stage, &plan, k, spheres, colliders, parallel);
+            }
+        }
+        contacts
+    }
+
+    /// [`Stage::Finish`] for this body: its sleep (for a body that ran substeps, `h` the step,
+    /// `spheres` and `colliders` what may wake it), then the runaway check.
+    pub(crate) fn finish_step(
+        &mut self,
+        h: f32,
+        spheres: &[RigidSphereState],
+        colliders: &[ColliderInstance],
+    ) {
+        if self
+            .scratch
+            .substep_plan
+            .take()
+            .is_some_and(|p| !p.explicit)
+        {
+            self.update_sleep(h, spheres, colliders);
+        }
+        self.catch_runaway();
+    }
+
+    /// Sets up this step's substeps (`substeps` of them if given, for a body in substeps,
+    /// else as many as the body's motion needs) and keeps the plan for the step's finish;
+    /// `None` for a body asleep through the step.
+    pub(crate) fn plan_substeps(
+        &mut self,
+        h: f32,
+        spheres: &[RigidSphereState],
+        colliders: &[ColliderInstance],
+        substeps: Option<u32>,
+    ) -> Option<SubstepPlan> {
+        self.scratch.substep_plan = None;
+        if !self.material.is_substepped() {
+            let plan = SubstepPlan {
+                substeps: 1,
+                hs: h,
+                explicit: true,
+                volumes: false,
+                shape_damping: 0.0,
+                dampers: false,
+                tet_compliance: None,
+            };
+            self.scratch.substep_plan = Some(plan);
+            return Some(plan);
+        }
+        if self.stays_asleep(h, spheres, colliders) {
+            return None;
+        }
+        let substeps = match substeps {
+            Some(n) => n.max(1),
+            None => self.substeps_needed(h, spheres, colliders, 0.0)?,
+        };
+        self.counters.substeps = substeps;
+        let volumes = self.material.method.is_xpbd();
+        let hs = h / substeps as f32;
+        // Stiffness-proportional damping in the shape projection (physical materials), or
+        // dampers on the velocities (the paper's springs).
+        let (shape_damping, dampers) = match self.material.elasticity {
+            Elasticity::Elastic(e) => (e.damping / hs, false),
+            Elasticity::Springs { .. } => (0.0, self.any_damping()),
+        };
+        // A physical material under the impulses keeps its shape per tet, unless its plastic
+        // springs are the edges (see `ElasticSettings`).
+        let tet_compliance = match (self.material.elasticity, self.material.plasticity) {
+            (Elasticity::Elastic(e), None) if !volumes => Some(e.tet_compliance()),
+            _ => None,
+        };
+        if tet_compliance.is_some() {
+            refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
+        }
+        // The rigid bodies of another engine get their gravity per substep too.
+        for body in &mut self.rigid.bodies {
+            body.linear_velocity -= h * body.gravity;
+        }
+        let plan = SubstepPlan {
+            substeps,
+            hs,
+            explicit: false,
+            volumes,
+            shape_damping,
+            dampers,
+            tet_compliance,
+        };
+        self.scratch.substep_plan = Some(plan);
+        Some(plan)
+    }
+
+    /// The substeps this step needs, for a body that other soft bodies approach at up to
+    /// `approach` (m/s; zero for a body alone); `None` for a body not solved in substeps.
+    pub(crate) fn substeps_needed(
+        &self,
+        h: f32,
+        spheres: &[RigidSphereState],
+        colliders: &[ColliderInstance],
+        approach: f32,
+    ) -> Option<u32> {
+        match (self.material.method, self.material.elasticity) {
+            (VolumeMethod::Xpbd(s), _) => Some(s.substeps.max(1)),
+            (VolumeMethod::Impulses(_), Elasticity::Elastic(e)) => {
+                let speed = self.substep_speed(h, spheres, colliders).max(approach);
+                Some(e.substeps(h, speed, self.shortest_edge))
+            }
+            _ => None,
+        }
+    }
+
+    /// The speed that sets a physical material's substeps (see
+    /// [`ElasticSettings::max_motion`](super::material::ElasticSettings::max_motion)): the
+    /// fastest particle relative to the body's mean motion, or its fastest in the world when a
+    /// particle would meet a collider or sphere within the step: a body falling or flying as
+    /// a whole needs no substeps for that, a landing does.
+    ///
+    /// For a body that touched other soft bodies in the last step, only the particles that
+    /// meet something count their speed in the world, and the relative speed is the
+    /// velocities' or, if less, how far a particle actually moved relative to the body in that
+    /// step over `h`: a particle held between bodies (in a pile) ends each substep with the
+    /// velocity of the push the other body handed it, which the next substep takes back;
+    /// counted as motion, it asked for the most substeps of a pile that barely moved, and the
+    /// smaller substeps' pushes then asked for fewer, step after step. An impact between
+    /// bodies is counted apart (`substeps_together`'s `approach`).
+    fn substep_speed(
+        &self,
+        h: f32,
+        spheres: &[RigidSphereState],
+        colliders: &[ColliderInstance],
+    ) -> f32 {
+        let (mut momentum, mut mass) = (Vec3::ZERO, 0.0);
+        for (&v, &m) in self.velocities.iter().zip(&self.masses) {
+            momentum += m * v;
+            mass += m;
+        }
+        let mean = momentum / mass;
+        let (mut relative, mut absolute) = (0.0f32, 0.0f32);
+        for &v in &self.velocities {
+            relative = relative.max((v - mean).length_squared());
+            absolute = absolute.max(v.length_squared());
+        }
+        let (relative, absolute) = (relative.sqrt(), absolute.sqrt());
+        let meets = |x: Vec3, v: Vec3| {
+            let end = x + h * v;
+            colliders.iter().any(|c| c.penetration(end).is_some())
+                || self.rigid.meets(end, h)
+                || spheres.iter().any(|s| {
+                    (end - (s.position + h * s.velocity)).length_squared()
+                        < (s.radius + h * (v - s.velocity).length()).powi(2)
+                })
+        };
+        let particles = || self.positions.iter().zip(&self.velocities);
+        let Some(moved) = self.last_relative_motion else {
+            let approaching = absolute > relative && particles().any(|(&x, &v)| meets(x, v));
+            return if approaching { absolute } else { relative };
+        };
+        let mut approaching = 0.0f32;
+        for (&x, &v) in particles() {
+            let speed = v.length_squared();
+            if speed > approaching * approaching && meets(x, v) {
+                approaching = speed.sqrt();
+            }
+        }
+        relative.min(moved / h).max(approaching)
+    }
+
+    /// Stage `stage` of substep `k` of `plan`, the body's blocks run by `parallel`. Returns the
+    /// contacts it resolved.
+    pub(crate) fn substep_stage(
+        &mut self,
+        stage: SubstepStage,
+        plan: &SubstepPlan,
+        k: u32,
+        spheres: &mut [RigidSphereState],
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) -> u32 {
+        let started = self.scratch.substep_clock.start();
+        let hs = plan.hs;
+        let contacts = match stage {
+            SubstepStage::Shape => {
+                if !plan.explicit {
+                    self.substep_shape(plan);
+                }
+                0
+            }
+            SubstepStage::Contacts if plan.explicit => {
+                self.resolve_contacts(hs, spheres, colliders, parallel)
+            }
+            SubstepStage::Contacts => {
+                self.substep_velocities(plan);
+                self.substep_contacts(plan, k, spheres, colliders)
+            }
+            SubstepStage::OneRing => {
+                if !plan.explicit {
+                    self.substep_damping(plan);
+                }
+                if !plan.volumes {
+                    self.one_ring_impulses(hs, spheres, parallel);
+                }
+                0
+            }
+            SubstepStage::PerTet => {
+                if !plan.volumes {
+                    self.per_tet_impulses(hs, spheres, parallel);
+                }
+                0
+            }
+            SubstepStage::Advance if plan.explicit => {
+                let contacts = self.resolve_contacts(hs, spheres, colliders, parallel);
+                self.integrate_positions(hs, parallel);
+                contacts
+            }
+            SubstepStage::Advance => {
+                self.substep_advance(plan);
+                0
+            }
+        };
+        self.scratch.substep_clock.stop(stage as usize, started);
+        contacts
+    }
+
+    /// The particles against the spheres, the rigid bodies of another engine, then the static
+    /// colliders (last, so that no particle is left inside the ground by a body pushing it):
+    /// the paper's springs' contact passes, on the predicted positions `x + h v`.
+    fn resolve_contacts(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) -> u32 {
+        self.resolve_sphere_contacts(h, spheres)
+            + self.resolve_rigid_contacts(h, 0.0)
+            + self.resolve_static_contacts(h, colliders, parallel)
+    }
+
+    /// [`SubstepStage::Shape`] in substeps: gravity, the predicted positions, the shape solve
+    /// (edges, or the tets' shapes; for XPBD the tets' volumes too). The particles are left
+    /// where it takes them; [`SoftBodyState::substep_velocities`] turns that into velocities.
+    pub(crate) fn substep_shape(&mut self, plan: &SubstepPlan) {
+        let hs = plan.hs;
+        let gravity = self.gravity;
+        for body in &mut self.rigid.bodies {
+            body.linear_velocity += hs * body.gravity;
+        }
+        // Predict; `predicted` holds where each particle started the substep.
+        for i in 0..self.positions.len() {
+            if self.inv_masses[i] > 0.0 {
+                self.velocities[i] += hs * gravity;
+            }
+            self.scratch.predicted[i] = Point4::new(self.positions[i]);
+            self.positions[i] += hs * self.velocities[i];
+        }
+        match plan.tet_compliance {
+            Some(compliance) => project_tet_shapes(
+                &self.scratch.shape_bundles,
+                &mut self.positions,
+                &self.scratch.predicted,
+                compliance,
+                hs * hs,
+                plan.shape_damping,
+            ),
+            None => self.project_edges(hs * hs, plan.shape_damping),
+        }
+        if plan.volumes {
+            self.project_volumes();
+        }
+    }
+
+    /// The velocities the substep's shape solve gives (where it, and the contacts between
+    /// bodies stepped together, took the particles), with the particles back where the
+    /// substep started.
+    fn substep_velocities(&mut self, plan: &SubstepPlan) {
+        let hs = plan.hs;
+        for i in 0..self.positions.len() {
+            let v = (self.positions[i] - self.scratch.predicted[i].vec3()) / hs;
+            if v.is_finite() {
+                self.velocities[i] = v;
+            } else {
+                self.velocities[i] = Vec3::ZERO;
+                self.counters.non_finite_velocities += 1;
+            }
+            self.positions[i] = self.scratch.predicted[i].vec3();
+        }
+    }
+
+    /// Substep `k`'s contacts with the spheres, rigid bodies and static colliders. Returns
+    /// the contacts.
+    fn substep_contacts(
+        &mut self,
+        plan: &SubstepPlan,
+        k: u32,
+        spheres: &mut [RigidSphereState],
+        colliders: &[ColliderInstance],
+    ) -> u32 {
+        let hs = plan.hs;
+        // Each sphere where it is at this substep's start, then back exactly where it was.
+        self.scratch.sphere_positions.clear();
+        for s in spheres.iter_mut() {
+            self.scratch.sphere_positions.push(s.position);
+            s.position += (k as f32 * hs) * s.velocity;
+        }
+        let mut contacts = self.resolve_sphere_contacts(hs, spheres);
+        for (s, &start) in spheres.iter_mut().zip(&self.scratch.sphere_positions) {
+            s.position = start;
+        }
+        contacts += self.resolve_rigid_contacts(hs, k as f32 * hs);
+        contacts + self.resolve_static_contacts(hs, colliders, &Serial)
+    }
+
+    /// A substep's damping (the paper's spring dampers, drag), then, before the volume
+    /// impulses, the velocities they start from (for [`SoftBodyState::substep_advance`]).
+    fn substep_damping(&mut self, plan: &SubstepPlan) {
+        let hs = plan.hs;
+        if plan.dampers {
+            self.damp_springs(hs);
+        }
+        let drag = self.material.linear_damping;
+        if drag > 0.0 {
+            let keep = 1.0 / (1.0 + hs * drag);
+            for (v, &w) in self.velocities.iter_mut().zip(&self.inv_masses) {
+                if w > 0.0 {
+                    *v *= keep;
+                }
+            }
+        }
+        if !plan.volumes {
+            self.scratch
+                .substep_velocities
+                .copy_from_slice(&self.velocities);
+            self.scratch.soft_removed.fill(Vec3::ZERO);
+        }
+    }
+
+    /// [`SubstepStage::Advance`] in substeps: `x += h_s v` (XPBD), or, after the paper's
+    /// impulses, with their energy kept in check: the positions take the impulses' whole change
+    /// `dv`, the velocities `k dv` with the largest `k` in `[0, 1]` that adds no kinetic
+    /// energy. An impulse that stops a compression (it takes away the velocity that compresses
+    /// the tets) keeps all of it (`k` = 1 while `sum m v.dv <= -1/2 sum m |dv|^2`); what only
+    /// restores drifted volume, a tet crushed by a landing or a tet inverted, moves the
+    /// particles back without launching them (PERFORMANCE.md, "The step of a physical
+    /// material"). One scale for the whole body, so momentum is conserved (the impulses'
+    /// `sum m dv` is zero, and so is `k` times it) but for what the static colliders pushed
+    /// back, whose friction comes last (`support_friction`).
+    fn substep_advance(&mut self, plan: &SubstepPlan) {
+        let hs = plan.hs;
+        if plan.volumes {
+            for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
+                *x += hs * *v;
+            }
+            return;
+        }
+        // `push`: what the static colliders pushed back, which gets its friction
+        // (`support_friction`). Pushes into another body come out here, to be handed to it
+        // (`soft_support`).
+        let soft_push = self.take_soft_pushes();
+        let (mut along, mut squared, mut push) = (0.0f64, 0.0f64, -soft_push);
+        for ((&v, &before), &m) in self
+            .velocities
+            .iter()
+            .zip(&self.scratch.substep_velocities)
+            .zip(&self.masses)
+        {
+            let dv = v - before;
+            along += (m * before.dot(dv)) as f64;
+            squared += (m * dv.length_squared()) as f64;
+            push += m * dv;
+        }
+        let k = if squared > 0.0 {
+            (-2.0 * along / squared).clamp(0.0, 1.0) as f32
+        } else {
+            1.0
+        };
+        let weight = self.static_contact_weight();
+        for i in 0..self.velocities.len() {
+            let before = self.scratch.substep_velocities[i];
+            let full = self.velocities[i];
+            let v = before + k * (full - before);
+            let friction = self.support_friction(push, weight, i, v);
+            self.positions[i] += hs * (full + friction);
+            self.velocities[i] = v + friction;
+        }
+        self.hand_soft_pushes(k);
+    }
+
+    /// Starts or stops timing this body's substep stages (the plugin times them).
+    pub(crate) fn time_substeps(&mut self, on: bool) {
+        self.scratch.substep_clock.on = on;
+    }
+
+    /// The seconds this body spent in each [`SubstepStage`] since the last call.
+    pub(crate) fn take_substep_seconds(&mut self) -> [f64; 5] {
+        std::mem::take(&mut self.scratch.substep_clock.seconds)
+    }
+}
+
+/// The spheres' part of `stage` that comes before the bodies': their gravity with the
+/// forces, their contacts with the static colliders before the substeps and again at the
+/// finish (after the particles pushed them).
+pub fn spheres_before_bodies(
+    stage: Stage,
+    h: f32,
+    gravity: Vec3,
+    spheres: &mut [RigidSphereState],
+    colliders: &[ColliderInstance],
+) {
+    for sphere in spheres {
+        match stage {
+            Stage::Forces => sphere.apply_forces(h, gravity),
+            Stage::Substeps | Stage::Finish => {
+                sphere.resolve_static_contacts(h, colliders);
+            }
+            Stage::Plasticity => {}
+        }
+    }
+}
+
+/// The spheres' part of `stage` that comes after the bodies': `x += h v` at the finish.
+pub fn spheres_after_bodies(stage: Stage, h: f32, spheres: &mut [RigidSphereState]) {
+    if stage == Stage::Finish {
+        for sphere in spheres {
+            sphere.integrate_position(h);
+        }
+    }
+}
