@@ -426,8 +426,8 @@ fn main() {
                         .spawn_body(&mut world.commands(), method, offset)
                         .expect("a standard scene");
                     world.flush();
-                    if !contacts && let Some(mut body) = world.get_mut::<SoftBody>(body) {
-                        body.state_mut().set_soft_contact_settings(None);
+                    if !contacts {
+                        world.entity_mut(body).insert(SoftBodyContactsDisabled);
                     }
                 }
                 world.spawn((StaticCollider::ground(0.8), Transform::default()));

@@ -141,7 +141,7 @@ fn throw_jelly(
     );
     commands.queue(move |world: &mut World| {
         if let Some(mut body) = world.get_mut::<SoftBody>(thrown) {
-            body.state_mut().velocities_mut().fill(forward * 5.0);
+            body.velocities_mut().fill(forward * 5.0);
         }
     });
 }

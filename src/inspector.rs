@@ -258,7 +258,7 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
         (false, None) => {}
     }
     if m != *body.state().material()
-        && let Err(e) = body.state_mut().set_material(m)
+        && let Err(e) = body.set_material(m)
     {
         ui.colored_label(egui::Color32::LIGHT_RED, e.to_string());
     }

@@ -22,7 +22,7 @@
 //! }
 //! assert!(body.volume_metrics().volume_error_pct.abs() < 1.0);
 //! ```
-#![warn(missing_docs)]
+#![deny(missing_docs)]
 
 /// The README's code, compiled (and, where it can run headless, run) by `cargo test`.
 #[cfg(all(doctest, feature = "render", feature = "avian"))]
@@ -48,8 +48,10 @@ pub mod scenes;
 pub mod surface;
 
 pub use components::{
-    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
-    SoftBodyGravity, SoftBodyStats, StaticCollider,
+    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
+    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity,
+    SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodyStats,
+    StaticCollider,
 };
 #[cfg(feature = "render")]
 pub use loading::{
@@ -106,8 +108,10 @@ impl bevy::app::PluginGroup for SoftBodyPlugins {
 pub mod prelude {
     pub use crate::SoftBodyPlugins;
     pub use crate::components::{
-        DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
-        SoftBodyGravity, SoftBodyStats, StaticCollider,
+        DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
+        SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity,
+        SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodyStats,
+        StaticCollider,
     };
     pub use crate::core::{
         ElasticSettings, Elasticity, ImpulseSettings, Plasticity, SoftBodyMaterial, TetMesh,

@@ -16,7 +16,8 @@ use bevy::prelude::*;
 use glam::UVec3;
 
 use crate::components::{
-    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity, StaticCollider,
+    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyGravity,
+    SoftBodySleepingDisabled, StaticCollider,
 };
 use crate::core::{
     Elasticity, Plasticity, Resolution, SoftBodyMaterial, TetMesh, TriangleSurface, VolumeMethod,
@@ -281,9 +282,7 @@ impl PaperScene {
         let mesh = self.tet_mesh();
         let mut body =
             SoftBody::new(mesh.clone(), self.material(method)).expect("scene materials are valid");
-        // The paper's scenes run as published, without sleeping (XPBD would sleep otherwise).
-        body.state_mut().set_sleep_settings(None);
-        for v in body.state_mut().velocities_mut() {
+        for v in body.velocities_mut() {
             v.y = -params.speed;
         }
         let (lo, hi) = mesh.bounds();
@@ -294,6 +293,9 @@ impl PaperScene {
                 body,
                 Transform::from_translation(place),
                 Name::new(self.name()),
+                // The paper's scenes run as published, without sleeping (XPBD would sleep
+                // otherwise).
+                SoftBodySleepingDisabled,
             ))
             .id();
         if self != PaperScene::BarTwist {

@@ -1,10 +1,14 @@
 //! The layout rules a newcomer relies on, checked on the crate's own source: no import circles
-//! between files, no file over 800 lines and no function over 120 lines outside its tests.
+//! between files, no file over 800 lines and no function over 120 lines outside its tests, and
+//! the body's state implemented in two files only.
 //!
 //! An import is a `crate::`, `super::` or `self::` path in a file's code (comments and its
 //! `#[cfg(test)] mod tests` left out); it points at the file of the longest module prefix of
-//! the path. A module's own submodules are part of it: `mod.rs` naming a child by a relative
-//! path is not an edge, a child using its parent's items (`use super::*`) is.
+//! the path. A module in a folder (`core/impulses/`, `plugin/`) is one room: its `mod.rs`
+//! reaches every file in it (a parent-child pair counts as an import both ways, so a file
+//! that imports the folder's module and is imported by one of its files closes a circle). The
+//! two umbrella folders, `src/` and `src/core/`, are not rooms: their `lib.rs` and `mod.rs`
+//! only declare and re-export.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -163,10 +167,43 @@ fn resolve<'a>(
     found
 }
 
+/// Whether `file` is a module compiled for tests only: declared under `#[cfg(test)]` in its
+/// parent (as `tests.rs` files and the passes' plain oracle are).
+fn test_only(src: &Path, file: &Path) -> bool {
+    let path = module_path(src, file);
+    let Some(name) = path.last() else {
+        return false;
+    };
+    let parent = &path[..path.len() - 1];
+    let folder = parent.iter().fold(src.to_path_buf(), |f, p| f.join(p));
+    let parent_file = if parent.is_empty() {
+        src.join("lib.rs")
+    } else if folder.join("mod.rs").exists() {
+        folder.join("mod.rs")
+    } else {
+        folder.with_extension("rs")
+    };
+    let text = std::fs::read_to_string(parent_file).unwrap_or_default();
+    ["mod", "pub mod", "pub(crate) mod"]
+        .iter()
+        .any(|m| text.contains(&format!("#[cfg(test)]\n{m} {name};")))
+}
+
+/// The room `file` is in: the file itself, or its folder for a module in a folder other than
+/// the umbrellas `src/` and `src/core/`.
+fn room(src: &Path, file: &Path) -> PathBuf {
+    let folder = file.parent().unwrap();
+    if folder == src || folder == src.join("core") {
+        file.to_path_buf()
+    } else {
+        folder.to_path_buf()
+    }
+}
+
 struct Crate {
     src: PathBuf,
     files: Vec<PathBuf>,
-    /// Each file's imports (other files), by file.
+    /// Each room's imports (other rooms), by room: a file, or a folder module's folder.
     imports: BTreeMap<PathBuf, Vec<PathBuf>>,
 }
 
@@ -179,18 +216,23 @@ fn this_crate() -> Crate {
         .map(|f| (module_path(&src, f), f.clone()))
         .collect();
     let mut imports = BTreeMap::new();
-    for file in &files {
+    for file in files.iter().filter(|f| !test_only(&src, f)) {
         let current = module_path(&src, file);
         let code = code(&std::fs::read_to_string(file).unwrap());
-        let mut targets: Vec<PathBuf> = paths(&code)
+        let targets: Vec<PathBuf> = paths(&code)
             .iter()
             .filter_map(|p| resolve(&modules, &current, p))
             .filter(|target| *target != file)
             .cloned()
             .collect();
+        let mut targets: Vec<PathBuf> = targets.iter().map(|t| room(&src, t)).collect();
+        let here = room(&src, file);
+        targets.retain(|t| *t != here);
+        imports.entry(here).or_insert_with(Vec::new).extend(targets);
+    }
+    for targets in imports.values_mut() {
         targets.sort();
         targets.dedup();
-        imports.insert(file.clone(), targets);
     }
     Crate {
         src,
@@ -229,8 +271,20 @@ fn no_file_imports_a_file_that_imports_it_back() {
     let sees =
         |from: &str, to: &str| krate.imports[&krate.src.join(from)].contains(&krate.src.join(to));
     assert!(sees("core/body.rs", "core/tet_mesh.rs"));
-    assert!(sees("plugin/mod.rs", "core/substep/mod.rs"));
-    for file in &krate.files {
+    assert!(sees("plugin", "core/substep.rs"));
+    // A folder module is one room, whichever of its files imports.
+    assert!(sees("core/impulses", "core/lanes.rs"));
+    assert!(sees("core/body.rs", "core/impulses"));
+    // Modules compiled for tests only import nothing here.
+    assert!(test_only(
+        &krate.src,
+        &krate.src.join("core/impulses/tests.rs")
+    ));
+    assert!(!test_only(
+        &krate.src,
+        &krate.src.join("core/impulses/ring.rs")
+    ));
+    for file in krate.imports.keys() {
         if let Some(circle) = circle_through(&krate.imports, file) {
             let names: Vec<_> = circle
                 .iter()
@@ -382,4 +436,36 @@ fn no_function_is_over_120_lines_outside_its_tests() {
         long.is_empty(),
         "functions over {MAX_FN_LINES} lines: {long:?}"
     );
+}
+
+/// The files besides `core/body.rs` and the step's (`core/substep.rs`) that implement
+/// `SoftBodyState`: none (but modules compiled for tests only, as the passes' plain oracle).
+/// Each concept's file works on its own state, which the body lends it.
+#[test]
+fn the_body_state_is_implemented_in_the_body_and_the_step_only() {
+    let krate = this_crate();
+    let allowed = [
+        krate.src.join("core/body.rs"),
+        krate.src.join("core/substep.rs"),
+    ];
+    let others: Vec<String> = krate
+        .files
+        .iter()
+        .filter(|f| !allowed.contains(f) && !test_only(&krate.src, f))
+        .filter(|f| {
+            let code = code(&std::fs::read_to_string(f).unwrap());
+            code.contains("impl SoftBodyState") || code.contains("for SoftBodyState")
+        })
+        .map(|f| f.strip_prefix(&krate.src).unwrap().display().to_string())
+        .collect();
+    assert!(others.is_empty(), "impl SoftBodyState in {others:?}");
+}
+
+/// Every public item reachable from the crate root has its doc comment: the crate denies
+/// `missing_docs`, so an undocumented one does not build.
+#[test]
+fn every_public_item_is_documented() {
+    let krate = this_crate();
+    let lib = std::fs::read_to_string(krate.src.join("lib.rs")).unwrap();
+    assert!(lib.contains("#![deny(missing_docs)]"));
 }

@@ -40,7 +40,7 @@ fn jelly(side: f32, corner: Vec3) -> SoftBody {
         .unwrap()
         .into();
     let mut body = SoftBody::new(mesh, SoftBodyMaterial::JELLY).unwrap();
-    body.state_mut().translate(corner);
+    body.translate(corner);
     body
 }
 
@@ -282,7 +282,7 @@ fn a_hanging_bag_swings_the_beam() {
             });
             assert_eq!(top.len(), 49);
             let mut body = SoftBody::new(mesh, SoftBodyMaterial::JELLY).unwrap();
-            body.state_mut().translate(Vec3::new(0.3, 1.74, -0.1));
+            body.translate(Vec3::new(0.3, 1.74, -0.1));
             bag = Some(
                 app.world_mut()
                     .spawn((body, SoftBodyAttachment::hard(beam, top.clone())))

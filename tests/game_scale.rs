@@ -265,7 +265,7 @@ fn a_body_that_runs_away_is_reported_once_and_put_back() {
     // The paper's explicit springs, far too stiff for a 1/60 s step: they explode.
     let material = SoftBodyMaterial::paper(1000.0, 1e5, 0.0);
     let mut soft_body = SoftBody::new(mesh.into(), material).unwrap();
-    soft_body.state_mut().velocities_mut()[0] = Vec3::new(1.0, 0.0, 0.0);
+    soft_body.velocities_mut()[0] = Vec3::new(1.0, 0.0, 0.0);
     let body = app
         .world_mut()
         .spawn((soft_body, Transform::from_xyz(0.0, 1.0, 0.0)))

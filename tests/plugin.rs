@@ -55,7 +55,7 @@ fn free_body_conserves_momentum_with_every_method() {
         let mut app = app(Vec3::ZERO);
         let mut body = SoftBody::new(cube(4), material(method)).unwrap();
         // A jumble of velocities: springs, damping and volume passes all act.
-        for (i, v) in body.state_mut().velocities_mut().iter_mut().enumerate() {
+        for (i, v) in body.velocities_mut().iter_mut().enumerate() {
             let k = i as f32;
             *v = Vec3::new((k * 0.37).sin(), (k * 0.91).cos(), (k * 1.7).sin()) * 0.5;
         }
@@ -352,7 +352,7 @@ fn bad_input_gives_errors_not_panics() {
 fn velocities_given_before_a_scaled_spawn_are_kept() {
     let mut app = app(Vec3::ZERO);
     let mut soft = SoftBody::new(cube(2), material(VolumeMethod::PAPER_IMPULSES)).unwrap();
-    for v in soft.state_mut().velocities_mut() {
+    for v in soft.velocities_mut() {
         *v = Vec3::new(1.0, 0.0, 0.0);
     }
     let body = app
@@ -489,4 +489,91 @@ fn the_plugin_group_steps_a_jelly_headless() {
         stats.peak_volume_error_pct
     );
     assert!(app.world().resource::<SeenErrors>().0.is_empty());
+}
+
+/// A body's settings are components: they show in the type registry (an inspector), and
+/// inserting, changing or removing one changes the body from the next step.
+#[test]
+fn settings_components_apply_live_and_are_reflected() {
+    let mut app = app(Vec3::new(0.0, -9.81, 0.0));
+    {
+        let registry = app.world().resource::<AppTypeRegistry>().read();
+        for (name, id) in [
+            ("contacts", std::any::TypeId::of::<SoftBodyContacts>()),
+            (
+                "no contacts",
+                std::any::TypeId::of::<SoftBodyContactsDisabled>(),
+            ),
+            ("sleep", std::any::TypeId::of::<SoftBodySleepThreshold>()),
+            (
+                "no sleep",
+                std::any::TypeId::of::<SoftBodySleepingDisabled>(),
+            ),
+            ("runaway", std::any::TypeId::of::<SoftBodyRunawayLimits>()),
+        ] {
+            let registered = registry.get(id);
+            assert!(
+                registered.is_some_and(|r| r.data::<ReflectComponent>().is_some()),
+                "{name} is not a reflected component"
+            );
+        }
+    }
+    record_errors(&mut app);
+    app.world_mut()
+        .spawn((StaticCollider::ground(0.8), Transform::default()));
+    // A rubber cube resting on the ground sleeps only once its component allows it.
+    let body = app
+        .world_mut()
+        .spawn((
+            SoftBody::new(cube(4), SoftBodyMaterial::RUBBER).unwrap(),
+            Transform::from_xyz(0.0, 0.01, 0.0),
+            SoftBodySleepingDisabled,
+        ))
+        .id();
+    let sleeping = |app: &App| app.world().get::<SoftBodyStats>(body).unwrap().sleeping;
+    for _ in 0..300 {
+        app.update();
+        assert!(!sleeping(&app), "asleep although sleeping is disabled");
+    }
+    app.world_mut()
+        .entity_mut(body)
+        .remove::<SoftBodySleepingDisabled>();
+    let mut asleep = false;
+    for _ in 0..300 {
+        app.update();
+        asleep |= sleeping(&app);
+    }
+    assert!(asleep, "the resting cube never fell asleep once allowed to");
+    // Limits a thrown body passes: it is caught and reported; with the default limits back,
+    // the same throw is not.
+    app.world_mut()
+        .entity_mut(body)
+        .insert(SoftBodyRunawayLimits {
+            max_speed: 2.0,
+            ..default()
+        });
+    let throw = |app: &mut App| {
+        let mut soft = app.world_mut().get_mut::<SoftBody>(body).unwrap();
+        soft.velocities_mut().fill(Vec3::new(3.0, 3.0, 0.0));
+    };
+    throw(&mut app);
+    app.update();
+    let runaways = |app: &App| {
+        let seen = &app.world().resource::<SeenErrors>().0;
+        seen.iter()
+            .filter(|e| matches!(e.kind, SoftBodyErrorKind::Runaway(_)))
+            .count()
+    };
+    assert_eq!(runaways(&app), 1);
+    app.world_mut()
+        .entity_mut(body)
+        .insert(SoftBodyRunawayLimits::default());
+    for _ in 0..200 {
+        app.update();
+    }
+    throw(&mut app);
+    for _ in 0..10 {
+        app.update();
+    }
+    assert_eq!(runaways(&app), 1);
 }

@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use bevy::prelude::*;
 use bevy::time::TimeUpdateStrategy;
-use bevy_soft_body::core::{SoftContactSettings, TetMesh, box_grid};
+use bevy_soft_body::core::{TetMesh, box_grid};
 use bevy_soft_body::game_scenes::{GameScene, GameShape, MeshStyle};
 use bevy_soft_body::prelude::*;
 use glam::UVec3;
@@ -28,7 +28,7 @@ fn jelly(cells: UVec3, corner: Vec3) -> SoftBody {
         .unwrap()
         .into();
     let mut body = SoftBody::new(mesh, SoftBodyMaterial::JELLY).unwrap();
-    body.state_mut().translate(corner);
+    body.translate(corner);
     body
 }
 
@@ -102,7 +102,7 @@ fn slab(style: MeshStyle, corner: Vec3) -> SoftBody {
     };
     let mesh = scene.tet_mesh().unwrap();
     let mut body = SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
-    body.state_mut().translate(corner);
+    body.translate(corner);
     body
 }
 
@@ -173,9 +173,9 @@ fn jellies_thrown_at_each_other_bounce_apart() {
     let mut app = app(Vec3::ZERO, Duration::from_secs_f64(1.0 / 60.0));
     let cells = UVec3::splat(6);
     let mut a = jelly(cells, Vec3::new(-0.5, 0.0, 0.0));
-    a.state_mut().velocities_mut().fill(4.0 * Vec3::X);
+    a.velocities_mut().fill(4.0 * Vec3::X);
     let mut b = jelly(cells, Vec3::new(0.25, 0.08, 0.05));
-    b.state_mut().velocities_mut().fill(-4.0 * Vec3::X);
+    b.velocities_mut().fill(-4.0 * Vec3::X);
     let carried = 4.0 * a.state().total_mass();
     let a = app.world_mut().spawn((a, Transform::default())).id();
     let b = app.world_mut().spawn((b, Transform::default())).id();
@@ -214,10 +214,12 @@ fn a_body_without_soft_contacts_passes_through() {
     let mut app = app(Vec3::ZERO, Duration::from_secs_f64(1.0 / 60.0));
     let cells = UVec3::splat(4);
     let mut a = jelly(cells, Vec3::new(-0.5, 0.0, 0.0));
-    a.state_mut().velocities_mut().fill(4.0 * Vec3::X);
-    a.state_mut().set_soft_contact_settings(None);
+    a.velocities_mut().fill(4.0 * Vec3::X);
     let b = jelly(cells, Vec3::new(0.25, 0.0, 0.0));
-    let a = app.world_mut().spawn((a, Transform::default())).id();
+    let a = app
+        .world_mut()
+        .spawn((a, Transform::default(), SoftBodyContactsDisabled))
+        .id();
     app.world_mut().spawn((b, Transform::default()));
     for _ in 0..30 {
         app.update();
@@ -275,16 +277,19 @@ fn a_bar_folding_under_its_weight_meets_itself_with_self_contacts() {
             .copied()
             .collect();
         let mut body = SoftBody::new(mesh, SoftBodyMaterial::JELLY).unwrap();
-        body.state_mut().translate(Vec3::Y);
-        let settings = body.state().soft_contact_settings().unwrap();
-        body.state_mut()
-            .set_soft_contact_settings(Some(SoftContactSettings {
-                self_contacts,
-                ..settings
-            }));
+        body.translate(Vec3::Y);
+        let contacts = SoftBodyContacts {
+            self_contacts,
+            ..default()
+        };
         let bar = app
             .world_mut()
-            .spawn((body, PinnedParticles(middle), Transform::default()))
+            .spawn((
+                body,
+                PinnedParticles(middle),
+                Transform::default(),
+                contacts,
+            ))
             .id();
         let mut worst = 0;
         for _ in 0..180 {

@@ -31,7 +31,7 @@ fn a_dropped_tetrahedralized_torus_keeps_its_volume() {
         scene.material(VolumeMethod::PAPER_IMPULSES),
     )
     .unwrap();
-    for v in body.state_mut().velocities_mut() {
+    for v in body.velocities_mut() {
         v.y = -1.0;
     }
     let body = app

@@ -77,14 +77,35 @@ impl SoftBody {
         })
     }
 
-    /// The simulation state: particles, springs, material.
+    /// The simulation state to read: particles, velocities, material, volume metrics. A game
+    /// changes a body through the methods below and the settings components
+    /// (`components/settings.rs`).
     pub fn state(&self) -> &SoftBodyState {
         &self.state
     }
 
-    /// The simulation state, to change velocities or the material at run time.
-    pub fn state_mut(&mut self) -> &mut SoftBodyState {
-        &mut self.state
+    /// The particles' velocities, m/s in world space, to set: throw a body, stop it. Wakes
+    /// the body.
+    pub fn velocities_mut(&mut self) -> &mut [Vec3] {
+        self.state.wake_up();
+        self.state.velocities_mut()
+    }
+
+    /// Moves every particle by `offset` (metres): before spawning, in the mesh's frame, or to
+    /// teleport a placed body, in the world.
+    pub fn translate(&mut self, offset: Vec3) {
+        self.state.translate(offset);
+    }
+
+    /// Changes the body's material, from its next step; an invalid material is refused and
+    /// changes nothing.
+    pub fn set_material(&mut self, material: SoftBodyMaterial) -> Result<(), MaterialError> {
+        self.state.set_material(material)
+    }
+
+    /// Wakes the body if it sleeps.
+    pub fn wake_up(&mut self) {
+        self.state.wake_up();
     }
 
     /// Whether the body has been placed at its spawn transform yet.

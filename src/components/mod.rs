@@ -3,9 +3,14 @@
 mod body;
 mod diagnostics;
 mod kinematics;
+pub(crate) mod settings;
 mod world;
 
 pub use body::SoftBody;
 pub use diagnostics::{SoftBodyError, SoftBodyErrorKind, SoftBodyStats};
 pub use kinematics::{DrivenParticles, PinnedParticles};
+pub use settings::{
+    SoftBodyContacts, SoftBodyContactsDisabled, SoftBodyRunawayLimits, SoftBodySleepThreshold,
+    SoftBodySleepingDisabled,
+};
 pub use world::{RigidSphere, SoftBodyGravity, StaticCollider};

@@ -1,6 +1,6 @@
 //! The state of one soft body: particles, springs, contacts and the caches of the volume
 //! passes, with what reads and sets them from outside a step (kinematic particles, metrics,
-//! momentum). The stages of a step are in their own files; their order is in `substep/`.
+//! momentum). The stages of a step are in their own files; their order is in `substep.rs`.
 
 use std::sync::Arc;
 
@@ -9,15 +9,17 @@ use glam::Vec3;
 use super::boundary::{Boundary, SoftContactSettings};
 use super::chunks::{ChunkFindings, in_particle_chunks};
 use super::colliders::{ColliderInstance, CollisionFilter, RigidContacts, RigidSphereState};
+use super::contacts::{ContactBody, ContactState};
 use super::deviatoric::{ShapeBundle, shape_bundles};
+use super::forces::Springs;
 use super::geometry::signed_volume;
-use super::impulses::{DriftTracking, PassWorker, SafeRadii, StepCounters};
+use super::impulses::{PassBody, StepCounters, VolumePassScratch};
 use super::lanes::Point4;
-use super::material::{Elasticity, MaterialError, SoftBodyMaterial};
+use super::material::{MaterialError, SoftBodyMaterial};
 use super::parallel::{BlockFlags, Parallel, SharedSlice};
 use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
 use super::sleep::{Sleep, SleepSettings};
-use super::substep::plan::{SubstepClock, SubstepPlan};
+use super::substep_plan::{SubstepClock, SubstepPlan};
 use super::tet_mesh::TetMesh;
 
 /// A particle index that does not exist in the body's mesh.
@@ -61,7 +63,7 @@ pub struct SoftBodyState {
     pub(crate) met_soft_bodies: bool,
     /// For a body that touched another soft body in the last step, how far its particles
     /// moved in it relative to the body's mean motion (the largest distance): what the
-    /// substeps count as its deformation (see `substep/`, `substep_speed`). `None` otherwise.
+    /// substeps count as its deformation (see `substep.rs`, `substep_speed`). `None` otherwise.
     pub(crate) last_relative_motion: Option<f32>,
     pub(crate) velocities: Vec<Vec3>,
     pub(crate) masses: Vec<f32>,
@@ -69,39 +71,11 @@ pub struct SoftBodyState {
     pub(crate) inv_masses: Vec<f32>,
     /// This step's kinematic particles and where they must be at its end.
     pub(crate) kinematic: Vec<(u32, Vec3)>,
-    /// Rest lengths at creation (`D0`).
-    pub(crate) spring_rest0: Vec<f32>,
-    /// Current rest lengths (differ from `spring_rest0` only through plasticity).
-    pub(crate) spring_rest: Vec<f32>,
-    /// Plastic strain `e_p` of each spring.
-    pub(crate) plastic_strain: Vec<f32>,
-    /// Each spring's `k_D` (J) from the material's [`Elasticity`]: the same for every spring
-    /// with the paper's springs, `E` times the volume of the tets around it for a physical
-    /// material.
-    pub(crate) edge_stiffness: Vec<f32>,
-    /// `1 / edge_stiffness`: each edge constraint's compliance in the substepped solvers.
-    pub(crate) edge_compliance: Vec<f32>,
-    /// Each spring's damper (N s/m).
-    pub(crate) edge_damping: Vec<f32>,
+    /// The springs on the mesh's edges (`forces.rs`).
+    pub(crate) springs: Springs,
     pub(crate) material: SoftBodyMaterial,
-    /// Per particle, the outward unit normal of what it touches this step (zero if nothing).
-    pub(crate) contact_normals: Vec<Vec3>,
-    /// Per particle touching two static colliders at once (on the edge or in the corner of a
-    /// room), the outward normal of the other one (zero otherwise): the volume impulses may
-    /// push it into neither, or they pump it into the one not recorded and the contacts throw
-    /// it back every substep.
-    pub(crate) contact_second: Vec<Vec3>,
-    /// Per particle in contact, the share `f` of a push into the contact that the particle keeps:
-    /// 0 against a static collider, `w_s / (w_p + w_s)` against a sphere.
-    pub(crate) contact_kept: Vec<f32>,
-    /// Per particle, where static friction holds it on the static collider it touches (NaN:
-    /// touching none); see `contacts.rs`, `static_friction`.
-    pub(crate) friction_anchors: Vec<Vec3>,
-    /// Per particle in contact with a sphere, that sphere's index in the slice the passes get;
-    /// `u32::MAX` otherwise.
-    pub(crate) contact_sphere: Vec<u32>,
-    /// The particles with a non-zero entry in `contact_normals`, to clear them cheaply.
-    pub(crate) touching: Vec<u32>,
+    /// What it touches and where friction holds it (`contacts.rs`).
+    pub(crate) contacts: ContactState,
     pub(crate) counters: StepCounters,
     /// This step's gravity, kept by `apply_forces` for the substeps.
     pub(crate) gravity: Vec3,
@@ -125,6 +99,8 @@ pub struct SoftBodyState {
     pub(crate) soft_contacts: Option<SoftContactSettings>,
     /// Its boundary triangles and particles, for soft contacts.
     pub(crate) boundary: Boundary,
+    /// What the volume passes keep between passes and steps (`impulses/`).
+    pub(crate) volume_passes: VolumePassScratch,
     /// A step's working memory and the caches that only save it work (see [`StepScratch`]).
     pub(crate) scratch: StepScratch,
 }
@@ -136,9 +112,6 @@ pub struct SoftBodyState {
 /// so that a step allocates nothing.
 #[derive(Clone, Debug)]
 pub(crate) struct StepScratch {
-    /// Each spring's unit direction this step (zero for a spring of no length), from its force
-    /// to its damper: one root and one division per spring instead of two.
-    pub(crate) spring_directions: Vec<Vec3>,
     /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
     /// passes. Kept zero between uses so that the passes never clear the whole array.
     pub(crate) per_particle: Vec<Vec3>,
@@ -146,31 +119,17 @@ pub(crate) struct StepScratch {
     /// change there (`apply_velocity_change`), so the passes read one array, not two.
     /// Four numbers each, so that four are gathered into SIMD lanes with a load each.
     pub(crate) predicted: Vec<Point4>,
-    /// Bounds that let most impulses skip the neighbour clamp (see `impulses/bounds.rs`).
-    pub(crate) clamp_bounds: SafeRadii,
-    /// What the clamp bounds track per particle while a volume pass runs.
-    pub(crate) clamp_motion: DriftTracking,
-    /// One per block of the mesh: what each job of a volume pass owns.
-    pub(crate) pass_workers: Vec<PassWorker>,
     /// One per block and phase: whether its job in the running pass is done.
     pub(crate) block_done: BlockFlags,
     /// Sphere positions saved during a substep's contacts (reused, so steps do not allocate).
     pub(crate) sphere_positions: Vec<Vec3>,
     /// One per chunk of particles: what each job of the contacts and the integration found.
     pub(crate) chunk_findings: Vec<ChunkFindings>,
-    /// Velocities before a substep's volume impulses (see `substep/`).
+    /// Velocities before a substep's volume impulses (see `substep.rs`).
     pub(crate) substep_velocities: Vec<Vec3>,
-    /// Per particle, how deep its predicted position was in a static collider in the last
-    /// contact pass (zero when it touched none) and the pair's friction: what
-    /// `SoftBodyState::support_friction` shares the ground's push out by.
-    pub(crate) static_contact: Vec<[f32; 2]>,
-    /// Per vertex, whether its ring was past its tolerance when its impulse last checked it:
-    /// a guess of whether it will be again, which decides only how the check is computed,
-    /// never its result (see `VolumePass::ring_impulse`).
-    pub(crate) ring_corrected: Vec<bool>,
     /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
     pub(crate) shape_bundles: Vec<ShapeBundle>,
-    /// This step's substeps, from their plan to the step's finish (`substep/`).
+    /// This step's substeps, from their plan to the step's finish (`substep.rs`).
     pub(crate) substep_plan: Option<SubstepPlan>,
     /// The time spent in each stage of the substeps, when the plugin times them.
     pub(crate) substep_clock: SubstepClock,
@@ -196,12 +155,8 @@ impl SoftBodyState {
     pub fn new(mesh: Arc<TetMesh>, material: SoftBodyMaterial) -> Result<Self, MaterialError> {
         material.validate()?;
         let n = mesh.vertex_count();
-        let spring_rest0: Vec<f32> = mesh
-            .edges()
-            .iter()
-            .map(|&[i, j]| mesh.positions()[i as usize].distance(mesh.positions()[j as usize]))
-            .collect();
-        let shortest_edge = spring_rest0.iter().copied().fold(f32::INFINITY, f32::min);
+        let springs = Springs::new(&mesh, material.elasticity);
+        let shortest_edge = springs.rest0.iter().copied().fold(f32::INFINITY, f32::min);
         let mut body = SoftBodyState {
             positions: mesh.positions().to_vec(),
             previous_positions: mesh.positions().to_vec(),
@@ -213,19 +168,9 @@ impl SoftBodyState {
             inv_masses: vec![0.0; n],
             // Room for every particle up front, so that no later step allocates (tests/no_alloc.rs).
             kinematic: Vec::with_capacity(n),
-            spring_rest: spring_rest0.clone(),
-            plastic_strain: vec![0.0; spring_rest0.len()],
-            edge_stiffness: vec![0.0; spring_rest0.len()],
-            edge_compliance: vec![0.0; spring_rest0.len()],
-            edge_damping: vec![0.0; spring_rest0.len()],
-            spring_rest0,
+            springs,
             material,
-            contact_normals: vec![Vec3::ZERO; n],
-            contact_second: vec![Vec3::ZERO; n],
-            contact_kept: vec![0.0; n],
-            friction_anchors: vec![Vec3::NAN; n],
-            contact_sphere: vec![u32::MAX; n],
-            touching: Vec::with_capacity(n),
+            contacts: ContactState::new(n),
             counters: StepCounters::default(),
             gravity: Vec3::ZERO,
             sleep: Sleep::new(Some(Default::default()), n),
@@ -241,17 +186,13 @@ impl SoftBodyState {
                 let (lo, hi) = mesh.bounds();
                 (hi - lo).length()
             },
+            volume_passes: VolumePassScratch::for_mesh(&mesh),
             scratch: StepScratch {
-                spring_directions: vec![Vec3::ZERO; mesh.edges().len()],
                 per_particle: vec![Vec3::ZERO; n],
                 predicted: vec![Point4::default(); n],
-                clamp_bounds: Default::default(),
-                clamp_motion: DriftTracking::default(),
-                pass_workers: vec![PassWorker::for_mesh(&mesh); mesh.blocks().count()],
                 block_done: BlockFlags::new(2 * mesh.blocks().count()),
                 sphere_positions: Vec::new(),
                 chunk_findings: ChunkFindings::for_particles(n),
-                ring_corrected: vec![false; n],
                 substep_plan: None,
                 substep_clock: SubstepClock::default(),
                 soft_touched: Vec::new(),
@@ -262,58 +203,12 @@ impl SoftBodyState {
                 soft_removed: vec![Vec3::ZERO; n],
                 soft_count: 0,
                 substep_velocities: vec![Vec3::ZERO; n],
-                static_contact: vec![[0.0; 2]; n],
                 shape_bundles: shape_bundles(&mesh),
             },
             mesh,
         };
         body.update_masses();
-        body.update_elasticity();
         Ok(body)
-    }
-
-    /// Fills the springs' stiffnesses, compliances and dampers from the material.
-    fn update_elasticity(&mut self) {
-        match self.material.elasticity {
-            Elasticity::Springs {
-                distance_stiffness,
-                damping,
-            } => {
-                self.edge_stiffness.fill(distance_stiffness);
-                self.edge_damping.fill(damping);
-            }
-            Elasticity::Elastic(e) => {
-                // Each tet's volume to each of its six edges.
-                let mesh = &*self.mesh;
-                let index: std::collections::HashMap<[u32; 2], usize> = mesh
-                    .edges()
-                    .iter()
-                    .enumerate()
-                    .map(|(k, &[i, j])| ([i.min(j), i.max(j)], k))
-                    .collect();
-                self.edge_stiffness.fill(0.0);
-                for (tet, &v0) in mesh.tets().iter().zip(mesh.rest_volumes()) {
-                    for (a, b) in [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)] {
-                        let (i, j) = (tet[a], tet[b]);
-                        if let Some(&k) = index.get(&[i.min(j), i.max(j)]) {
-                            self.edge_stiffness[k] += e.youngs_modulus * v0;
-                        }
-                    }
-                }
-                for ((c, &k), &rest) in self
-                    .edge_damping
-                    .iter_mut()
-                    .zip(&self.edge_stiffness)
-                    .zip(&self.spring_rest0)
-                {
-                    // A spring constant `k_D / D0^2` (N/m), times `beta`.
-                    *c = e.damping * k / (rest * rest);
-                }
-            }
-        }
-        for (c, &k) in self.edge_compliance.iter_mut().zip(&self.edge_stiffness) {
-            *c = if k > 0.0 { 1.0 / k } else { f32::INFINITY };
-        }
     }
 
     fn update_masses(&mut self) {
@@ -344,9 +239,10 @@ impl SoftBodyState {
     /// The particles that touched a collider or sphere in the last step, with the outward
     /// normal of what they touched.
     pub fn contacts(&self) -> impl Iterator<Item = (usize, Vec3)> + '_ {
-        self.touching
+        let c = &self.contacts;
+        c.touching
             .iter()
-            .map(|&i| (i as usize, self.contact_normals[i as usize]))
+            .map(|&i| (i as usize, c.normals[i as usize]))
     }
 
     /// Particle positions at the start of the last step (equal to [`Self::positions`] before
@@ -406,7 +302,8 @@ impl SoftBodyState {
             self.update_masses();
         }
         if elasticity_changed {
-            self.update_elasticity();
+            self.springs
+                .update_elasticity(&self.mesh, self.material.elasticity);
         }
         Ok(())
     }
@@ -418,7 +315,7 @@ impl SoftBodyState {
 
     /// Current rest length of each spring (one per mesh edge), after plasticity.
     pub fn spring_rest_lengths(&self) -> &[f32] {
-        &self.spring_rest
+        &self.springs.rest
     }
 
     /// This step's kinematic particles and their targets.
@@ -427,7 +324,7 @@ impl SoftBodyState {
     }
 
     /// Frees every particle made kinematic for the last step.
-    pub fn clear_kinematic(&mut self) {
+    pub(crate) fn clear_kinematic(&mut self) {
         for &(i, _) in &self.kinematic {
             self.inv_masses[i as usize] = 1.0 / self.masses[i as usize];
         }
@@ -450,20 +347,15 @@ impl SoftBodyState {
     }
 
     /// Starts a step: clears the counters and last step's contacts.
-    pub fn begin_step(&mut self) {
+    pub(crate) fn begin_step(&mut self) {
         self.counters = StepCounters::default();
         self.runaway = None;
         let met = std::mem::take(&mut self.met_soft_bodies);
         self.last_relative_motion = (self.motion_tracked && met).then(|| self.relative_motion());
         self.motion_tracked = true;
         self.previous_positions.copy_from_slice(&self.positions);
-        self.scratch.clamp_bounds.taken_this_step = false;
-        for &i in &self.touching {
-            self.contact_normals[i as usize] = Vec3::ZERO;
-            self.contact_second[i as usize] = Vec3::ZERO;
-            self.contact_sphere[i as usize] = u32::MAX;
-        }
-        self.touching.clear();
+        self.volume_passes.begin_step();
+        self.contacts.begin_step();
     }
 
     /// The largest distance a particle moved since `previous_positions`, relative to the
@@ -490,24 +382,6 @@ impl SoftBodyState {
             .map(|(&x, &x0)| (x - x0 - mean).length_squared())
             .fold(0.0f32, f32::max);
         farthest.sqrt()
-    }
-
-    /// Records that particle `i` touches a surface with outward unit `normal`, keeping the share
-    /// `kept` of pushes into it; `sphere` is the sphere's index, if it is one.
-    #[inline]
-    pub(crate) fn record_contact(
-        &mut self,
-        i: usize,
-        normal: Vec3,
-        kept: f32,
-        sphere: Option<usize>,
-    ) {
-        if self.contact_normals[i] == Vec3::ZERO {
-            self.touching.push(i as u32);
-        }
-        self.contact_normals[i] = normal;
-        self.contact_kept[i] = kept;
-        self.contact_sphere[i] = sphere.map_or(u32::MAX, |k| k as u32);
     }
 
     /// `x += h v` for the paper's springs (their substep's advance). A particle whose new
@@ -553,15 +427,84 @@ impl SoftBodyState {
     }
 
     /// Sets every predicted position to `x + h v`.
+    #[cfg(test)]
     pub(crate) fn refresh_predicted(&mut self, h: f32) {
-        for ((xp, x), v) in self
-            .scratch
-            .predicted
-            .iter_mut()
-            .zip(&self.positions)
-            .zip(&self.velocities)
-        {
-            *xp = Point4::new(*x + h * *v);
+        self.pass_body().refresh_predicted(h);
+    }
+
+    /// The body as its contact passes see it (see [`ContactBody`]).
+    pub(crate) fn contact_body(&mut self) -> ContactBody<'_> {
+        ContactBody {
+            positions: &self.positions,
+            velocities: &mut self.velocities,
+            inv_masses: &self.inv_masses,
+            friction: self.material.friction,
+            filter: self.collision_filter,
+            contacts: &mut self.contacts,
+            chunk_findings: &mut self.scratch.chunk_findings,
+        }
+    }
+
+    /// Pushes predicted positions out of static colliders (see
+    /// [`ContactBody::resolve_static`]). Returns the number of contacts.
+    pub(crate) fn resolve_static_contacts(
+        &mut self,
+        h: f32,
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) -> u32 {
+        self.contact_body().resolve_static(h, colliders, parallel)
+    }
+
+    /// Pushes predicted positions out of the rigid spheres, pushing them back (see
+    /// [`ContactBody::resolve_spheres`]). Returns the number of contacts.
+    pub(crate) fn resolve_sphere_contacts(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+    ) -> u32 {
+        self.contact_body().resolve_spheres(h, spheres)
+    }
+
+    /// Pushes predicted positions out of the rigid bodies of another engine where they are
+    /// `elapsed` seconds into the step plus `h` (see [`ContactBody::resolve_rigid`]).
+    pub(crate) fn resolve_rigid_contacts(&mut self, h: f32, elapsed: f32) -> u32 {
+        let mut rigid = std::mem::take(&mut self.rigid);
+        let contacts = self.contact_body().resolve_rigid(h, elapsed, &mut rigid);
+        self.rigid = rigid;
+        contacts
+    }
+
+    /// The rigid bodies this body meets in its next step (see [`RigidContacts`]): set them
+    /// before the step, read their changed velocities after it.
+    pub(crate) fn rigid_contacts_mut(&mut self) -> &mut RigidContacts {
+        &mut self.rigid
+    }
+
+    /// The rigid bodies this body meets, with the velocities its contacts left them.
+    pub(crate) fn rigid_contacts(&self) -> &RigidContacts {
+        &self.rigid
+    }
+
+    /// The body as its volume passes see it (see [`PassBody`]).
+    pub(crate) fn pass_body(&mut self) -> PassBody<'_> {
+        PassBody {
+            mesh: &self.mesh,
+            method: self.material.method,
+            positions: &self.positions,
+            inv_masses: &self.inv_masses,
+            velocities: &mut self.velocities,
+            contact_normals: &self.contacts.normals,
+            contact_second: &self.contacts.second,
+            contact_kept: &self.contacts.kept,
+            contact_sphere: &self.contacts.sphere,
+            touching: &self.contacts.touching,
+            counters: &mut self.counters,
+            predicted: &mut self.scratch.predicted,
+            per_particle: &mut self.scratch.per_particle,
+            soft_removed: &mut self.scratch.soft_removed,
+            block_done: &self.scratch.block_done,
+            passes: &mut self.volume_passes,
         }
     }
 
@@ -626,7 +569,7 @@ impl SoftBodyState {
 
     /// The bounds of where the particles are and where they would be after `h` at their
     /// velocities; `None` for a body whose positions are not finite.
-    pub fn swept_bounds(&self, h: f32) -> Option<parry3d::bounding_volume::Aabb> {
+    pub(crate) fn swept_bounds(&self, h: f32) -> Option<parry3d::bounding_volume::Aabb> {
         let (mut lo, mut hi) = (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         for (&x, &v) in self.positions.iter().zip(&self.velocities) {
             let end = x + h * v;
@@ -634,6 +577,21 @@ impl SoftBodyState {
             hi = hi.max(x).max(end);
         }
         (lo.is_finite() && hi.is_finite()).then(|| parry3d::bounding_volume::Aabb::new(lo, hi))
+    }
+
+    /// How this body meets other soft bodies (`None`: it passes through them).
+    pub fn soft_contact_settings(&self) -> Option<SoftContactSettings> {
+        self.soft_contacts
+    }
+
+    /// Sets how this body meets other soft bodies (`None`: it passes through them).
+    pub fn set_soft_contact_settings(&mut self, settings: Option<SoftContactSettings>) {
+        self.soft_contacts = settings;
+    }
+
+    /// The body's boundary triangles and particles.
+    pub fn boundary(&self) -> &Boundary {
+        &self.boundary
     }
 
     /// Which colliders this body meets (all by default).
@@ -754,6 +712,7 @@ impl SoftBodyState {
 #[cfg(test)]
 mod tests {
     use crate::core::Serial;
+    use crate::core::material::Elasticity;
     use std::sync::Arc;
 
     use glam::Vec3;

@@ -143,7 +143,11 @@ impl RigidSphereState {
     }
 
     /// Pushes the predicted sphere out of static colliders. Returns the number of contacts.
-    pub fn resolve_static_contacts(&mut self, h: f32, colliders: &[ColliderInstance]) -> u32 {
+    pub(crate) fn resolve_static_contacts(
+        &mut self,
+        h: f32,
+        colliders: &[ColliderInstance],
+    ) -> u32 {
         if self.inv_mass == 0.0 {
             return 0;
         }

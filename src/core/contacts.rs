@@ -9,7 +9,7 @@
 //!
 //! A particle in contact remembers the contact normal until the next step, and the volume passes
 //! keep only the share of a push into the contact that the particle would keep after the last
-//! contact pass (see `SoftBodyState::constrain_direction`): none against a static collider,
+//! contact pass (see `constrain_direction`): none against a static collider,
 //! `w_s / (w_p + w_s)` against a sphere, whose push back on the particle is what lets a soft
 //! body carry it.
 //!
@@ -33,10 +33,10 @@
 use glam::Vec3;
 use parry3d::bounding_volume::Aabb;
 
-use super::body::SoftBodyState;
-use super::chunks::in_particle_chunks;
+use super::chunks::{ChunkFindings, in_particle_chunks};
 use super::colliders::{
-    ColliderInstance, RigidContacts, RigidSphereState, combined_friction, friction_change,
+    ColliderInstance, CollisionFilter, RigidContacts, RigidSphereState, combined_friction,
+    friction_change,
 };
 use super::parallel::{Parallel, SharedSlice};
 
@@ -80,96 +80,68 @@ fn static_friction(
     (v, x + h * v)
 }
 
-impl SoftBodyState {
-    /// Pushes predicted positions out of static colliders. Returns the number of contacts.
-    ///
-    /// The particles are run in chunks by `parallel`: each particle's contacts depend on that
-    /// particle alone, and the particles
-    /// newly in contact are listed in index order as one after another would, so the result
-    /// is the same on any number of threads.
-    pub fn resolve_static_contacts(
-        &mut self,
-        h: f32,
-        colliders: &[ColliderInstance],
-        parallel: &dyn Parallel,
-    ) -> u32 {
-        if colliders.is_empty() {
-            return 0;
+/// What a body remembers of its contacts with colliders, spheres, rigid bodies and other
+/// soft bodies: what the volume passes must not push into, and where friction holds it.
+#[derive(Clone, Debug)]
+pub(crate) struct ContactState {
+    /// Per particle, the outward unit normal of what it touches this step (zero if nothing).
+    pub(crate) normals: Vec<Vec3>,
+    /// Per particle touching two static colliders at once (on the edge or in the corner of a
+    /// room), the outward normal of the other one (zero otherwise): the volume impulses may
+    /// push it into neither, or they pump it into the one not recorded and the contacts throw
+    /// it back every substep.
+    pub(crate) second: Vec<Vec3>,
+    /// Per particle in contact, the share `f` of a push into the contact that the particle
+    /// keeps: 0 against a static collider, `w_s / (w_p + w_s)` against a sphere.
+    pub(crate) kept: Vec<f32>,
+    /// Per particle, where static friction holds it on the static collider it touches (NaN:
+    /// touching none); see `static_friction`.
+    pub(crate) anchors: Vec<Vec3>,
+    /// Per particle in contact with a sphere, that sphere's index in the slice the passes get;
+    /// `u32::MAX` otherwise.
+    pub(crate) sphere: Vec<u32>,
+    /// The particles with a non-zero entry in `normals`, to clear them cheaply.
+    pub(crate) touching: Vec<u32>,
+    /// Per particle, how deep its predicted position was in a static collider in the last
+    /// contact pass (zero when it touched none) and the pair's friction: what
+    /// `support_friction` shares the ground's push out by.
+    pub(crate) static_contact: Vec<[f32; 2]>,
+}
+
+impl ContactState {
+    /// No contacts, for `n` particles.
+    pub(crate) fn new(n: usize) -> Self {
+        ContactState {
+            normals: vec![Vec3::ZERO; n],
+            second: vec![Vec3::ZERO; n],
+            kept: vec![0.0; n],
+            anchors: vec![Vec3::NAN; n],
+            sphere: vec![u32::MAX; n],
+            touching: Vec::with_capacity(n),
+            static_contact: vec![[0.0; 2]; n],
         }
-        let friction = self.material.friction;
-        let filter = self.collision_filter;
-        let n = self.positions.len();
-        let (positions, inv_masses) = (&self.positions[..], &self.inv_masses[..]);
-        // SAFETY: each job reads and writes only its own chunk's particles.
-        let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
-        let normals = unsafe { SharedSlice::new(&mut self.contact_normals) };
-        let second = unsafe { SharedSlice::new(&mut self.contact_second) };
-        let kept = unsafe { SharedSlice::new(&mut self.contact_kept) };
-        let sphere = unsafe { SharedSlice::new(&mut self.contact_sphere) };
-        let anchors = unsafe { SharedSlice::new(&mut self.friction_anchors) };
-        let static_contact = unsafe { SharedSlice::new(&mut self.scratch.static_contact) };
-        in_particle_chunks(
-            parallel,
-            &mut self.scratch.chunk_findings,
-            n,
-            |found, particles| {
-                for i in particles {
-                    if inv_masses[i] == 0.0 {
-                        continue;
-                    }
-                    let mut touched = false;
-                    // The deepest other collider the particle touches in this pass, if its
-                    // surface faces another way than the last one's.
-                    let mut other = (0.0f32, Vec3::ZERO);
-                    static_contact.set(i, [0.0; 2]);
-                    for c in colliders {
-                        if !filter.interacts_with(c.filter) {
-                            continue;
-                        }
-                        let x = positions[i];
-                        let xp = x + h * velocities.get(i);
-                        let Some((depth, normal)) = c.penetration(xp) else {
-                            continue;
-                        };
-                        if touched {
-                            let [last_depth, _] = static_contact.get(i);
-                            let last = normals.get(i);
-                            if last.dot(normal) < DISTINCT_NORMALS && last_depth >= other.0 {
-                                other = (last_depth, last);
-                            }
-                        }
-                        touched = true;
-                        let v = velocities.get(i) + normal * (depth / h);
-                        let mu = combined_friction(friction, c.friction);
-                        let (v, anchor) =
-                            static_friction(x, v, normal, depth, mu, h, anchors.get(i));
-                        velocities.set(i, v);
-                        anchors.set(i, anchor);
-                        static_contact.set(i, [depth, mu]);
-                        // As `record_contact`, with the new ones listed by the job.
-                        if normals.get(i) == Vec3::ZERO {
-                            found.new_touching.push(i as u32);
-                        }
-                        normals.set(i, normal);
-                        kept.set(i, 0.0);
-                        sphere.set(i, u32::MAX);
-                        found.contacts += 1;
-                    }
-                    if touched {
-                        second.set(i, other.1);
-                    } else {
-                        anchors.set(i, Vec3::NAN);
-                    }
-                }
-            },
-        );
-        let mut contacts = 0;
-        for found in &mut self.scratch.chunk_findings {
-            self.touching.extend_from_slice(&found.new_touching);
-            found.new_touching.clear();
-            contacts += std::mem::take(&mut found.contacts);
+    }
+
+    /// At a step's start: last step's contacts forgotten (the friction anchors kept).
+    pub(crate) fn begin_step(&mut self) {
+        for &i in &self.touching {
+            self.normals[i as usize] = Vec3::ZERO;
+            self.second[i as usize] = Vec3::ZERO;
+            self.sphere[i as usize] = u32::MAX;
         }
-        contacts
+        self.touching.clear();
+    }
+
+    /// Records that particle `i` touches a surface with outward unit `normal`, keeping the
+    /// share `kept` of pushes into it; `sphere` is the sphere's index, if it is one.
+    #[inline]
+    pub(crate) fn record(&mut self, i: usize, normal: Vec3, kept: f32, sphere: Option<usize>) {
+        if self.normals[i] == Vec3::ZERO {
+            self.touching.push(i as u32);
+        }
+        self.normals[i] = normal;
+        self.kept[i] = kept;
+        self.sphere[i] = sphere.map_or(u32::MAX, |k| k as u32);
     }
 
     /// Coulomb friction for the push the static colliders gave a substep's volume impulses:
@@ -187,31 +159,132 @@ impl SoftBodyState {
         i: usize,
         v: Vec3,
     ) -> Vec3 {
-        let [depth, mu] = self.scratch.static_contact[i];
+        let [depth, mu] = self.static_contact[i];
         if depth <= 0.0 || total_weight <= 0.0 {
             return Vec3::ZERO;
         }
-        let n = self.contact_normals[i];
+        let n = self.normals[i];
         let share = push.dot(n).max(0.0) * depth / total_weight;
         friction_change(v - n * v.dot(n), mu * share)
     }
 
     /// The weight `support_friction` shares the push out by: the particles' mass times depth
-    /// in the static colliders, summed.
-    pub(crate) fn static_contact_weight(&self) -> f32 {
-        self.scratch
-            .static_contact
+    /// in the static colliders, summed (`masses` the body's).
+    pub(crate) fn static_contact_weight(&self, masses: &[f32]) -> f32 {
+        self.static_contact
             .iter()
-            .zip(&self.masses)
+            .zip(masses)
             .map(|(&[depth, _], &m)| m * depth)
             .sum()
+    }
+}
+
+/// A body as its contact passes see it; the body lends its parts
+/// (`SoftBodyState::contact_body`).
+pub(crate) struct ContactBody<'a> {
+    pub(crate) positions: &'a [Vec3],
+    pub(crate) velocities: &'a mut [Vec3],
+    pub(crate) inv_masses: &'a [f32],
+    /// The material's friction coefficient.
+    pub(crate) friction: f32,
+    /// Which colliders the body meets.
+    pub(crate) filter: CollisionFilter,
+    pub(crate) contacts: &'a mut ContactState,
+    pub(crate) chunk_findings: &'a mut [ChunkFindings],
+}
+
+impl ContactBody<'_> {
+    /// Pushes predicted positions out of static colliders. Returns the number of contacts.
+    ///
+    /// The particles are run in chunks by `parallel`: each particle's contacts depend on that
+    /// particle alone, and the particles
+    /// newly in contact are listed in index order as one after another would, so the result
+    /// is the same on any number of threads.
+    pub(crate) fn resolve_static(
+        &mut self,
+        h: f32,
+        colliders: &[ColliderInstance],
+        parallel: &dyn Parallel,
+    ) -> u32 {
+        if colliders.is_empty() {
+            return 0;
+        }
+        let (friction, filter) = (self.friction, self.filter);
+        let n = self.positions.len();
+        let (positions, inv_masses) = (self.positions, self.inv_masses);
+        // SAFETY: each job reads and writes only its own chunk's particles.
+        let velocities = unsafe { SharedSlice::new(self.velocities) };
+        let normals = unsafe { SharedSlice::new(&mut self.contacts.normals) };
+        let second = unsafe { SharedSlice::new(&mut self.contacts.second) };
+        let kept = unsafe { SharedSlice::new(&mut self.contacts.kept) };
+        let sphere = unsafe { SharedSlice::new(&mut self.contacts.sphere) };
+        let anchors = unsafe { SharedSlice::new(&mut self.contacts.anchors) };
+        let static_contact = unsafe { SharedSlice::new(&mut self.contacts.static_contact) };
+        in_particle_chunks(parallel, self.chunk_findings, n, |found, particles| {
+            for i in particles {
+                if inv_masses[i] == 0.0 {
+                    continue;
+                }
+                let mut touched = false;
+                // The deepest other collider the particle touches in this pass, if its
+                // surface faces another way than the last one's.
+                let mut other = (0.0f32, Vec3::ZERO);
+                static_contact.set(i, [0.0; 2]);
+                for c in colliders {
+                    if !filter.interacts_with(c.filter) {
+                        continue;
+                    }
+                    let x = positions[i];
+                    let xp = x + h * velocities.get(i);
+                    let Some((depth, normal)) = c.penetration(xp) else {
+                        continue;
+                    };
+                    if touched {
+                        let [last_depth, _] = static_contact.get(i);
+                        let last = normals.get(i);
+                        if last.dot(normal) < DISTINCT_NORMALS && last_depth >= other.0 {
+                            other = (last_depth, last);
+                        }
+                    }
+                    touched = true;
+                    let v = velocities.get(i) + normal * (depth / h);
+                    let mu = combined_friction(friction, c.friction);
+                    let (v, anchor) = static_friction(x, v, normal, depth, mu, h, anchors.get(i));
+                    velocities.set(i, v);
+                    anchors.set(i, anchor);
+                    static_contact.set(i, [depth, mu]);
+                    // As `ContactState::record`, with the new ones listed by the job.
+                    if normals.get(i) == Vec3::ZERO {
+                        found.new_touching.push(i as u32);
+                    }
+                    normals.set(i, normal);
+                    kept.set(i, 0.0);
+                    sphere.set(i, u32::MAX);
+                    found.contacts += 1;
+                }
+                if touched {
+                    second.set(i, other.1);
+                } else {
+                    anchors.set(i, Vec3::NAN);
+                }
+            }
+        });
+        let mut contacts = 0;
+        for found in self.chunk_findings.iter_mut() {
+            self.contacts
+                .touching
+                .extend_from_slice(&found.new_touching);
+            found.new_touching.clear();
+            contacts += std::mem::take(&mut found.contacts);
+        }
+        contacts
     }
 
     /// Pushes predicted positions out of the (predicted) rigid spheres, pushing the spheres
     /// back. Returns the number of contacts.
-    pub fn resolve_sphere_contacts(&mut self, h: f32, spheres: &mut [RigidSphereState]) -> u32 {
+    pub(crate) fn resolve_spheres(&mut self, h: f32, spheres: &mut [RigidSphereState]) -> u32 {
         let mut contacts = 0;
-        let friction = self.material.friction;
+        let friction = self.friction;
         for (k, s) in spheres.iter_mut().enumerate() {
             let reach = s.radius + h * s.velocity.length();
             let centre_now = s.position;
@@ -250,34 +323,20 @@ impl SoftBodyState {
                     self.velocities[i] -= t * (jt * w);
                     s.velocity += t * (jt * s.inv_mass);
                 }
-                self.record_contact(i, n, s.inv_mass / w_sum, Some(k));
+                self.contacts.record(i, n, s.inv_mass / w_sum, Some(k));
                 contacts += 1;
             }
         }
         contacts
     }
-}
-
-impl SoftBodyState {
-    /// The rigid bodies this body meets in its next step (see [`RigidContacts`]): set them
-    /// before the step, read their changed velocities after it.
-    pub fn rigid_contacts_mut(&mut self) -> &mut RigidContacts {
-        &mut self.rigid
-    }
-
-    /// The rigid bodies this body meets, with the velocities its contacts left them.
-    pub fn rigid_contacts(&self) -> &RigidContacts {
-        &self.rigid
-    }
 
     /// Pushes predicted positions out of the rigid bodies' colliders where they are `elapsed`
-    /// seconds into the step (a substep's start) plus `h`, pushing the bodies back. Returns the
+    /// seconds into the step (a substep's start) plus `h`, pushing the bodies (`rigid`) back. Returns the
     /// number of contacts.
-    pub(crate) fn resolve_rigid_contacts(&mut self, h: f32, elapsed: f32) -> u32 {
-        if self.rigid.colliders.is_empty() && self.rigid.attachments.is_empty() {
+    pub(crate) fn resolve_rigid(&mut self, h: f32, elapsed: f32, rigid: &mut RigidContacts) -> u32 {
+        if rigid.colliders.is_empty() && rigid.attachments.is_empty() {
             return 0;
         }
-        let mut rigid = std::mem::take(&mut self.rigid);
         // Attached particles first: each is taken to its point of the body where both are
         // predicted to be, sharing the impulse by inverse mass (the body's at that point), or
         // pulled there by its spring (XPBD's compliance over the step's length). A body holding
@@ -311,8 +370,7 @@ impl SoftBodyState {
             self.velocities[i] += n * (lambda * w);
             body.apply_impulse(-n * lambda, r);
         }
-        let friction = self.material.friction;
-        let filter = self.collision_filter;
+        let (friction, filter) = (self.friction, self.filter);
         let mut contacts = 0;
         for c in &rigid.colliders {
             if !filter.interacts_with(c.filter) {
@@ -358,11 +416,10 @@ impl SoftBodyState {
                 }
                 // The volume passes keep the whole of a push into the body: the next contact
                 // pass hands it to the body, so momentum stays conserved.
-                self.record_contact(i, n, 1.0, None);
+                self.contacts.record(i, n, 1.0, None);
                 contacts += 1;
             }
         }
-        self.rigid = rigid;
         contacts
     }
 }
@@ -371,7 +428,8 @@ impl SoftBodyState {
 mod tests {
     use super::*;
     use crate::core::Serial;
-    use crate::core::colliders::{CollisionFilter, RigidBodyMotion, RigidCollider};
+    use crate::core::body::SoftBodyState;
+    use crate::core::colliders::{RigidBodyMotion, RigidCollider};
     use crate::core::material::SoftBodyMaterial;
     use crate::core::parallel::Threads;
     use glam::{Mat3, Quat, UVec3};

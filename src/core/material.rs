@@ -46,7 +46,7 @@ impl VolumeMethod {
     }
 
     /// Whether this is [`VolumeMethod::Xpbd`], which projects the tets' volumes in its shape
-    /// solve instead of the impulses (`substep/`).
+    /// solve instead of the impulses (`substep.rs`).
     pub fn is_xpbd(&self) -> bool {
         matches!(self, VolumeMethod::Xpbd(_))
     }
@@ -154,7 +154,7 @@ pub enum Elasticity {
 /// `K = E / (3 (1 - 2 nu))` (`E` the Young's modulus, `nu` the Poisson's ratio), solved as XPBD
 /// constraints (Macklin et al. 2016) in substeps of at most `max_substep` seconds, each with
 /// gravity, contacts and the paper's volume impulses (the "Small Steps" scheme, Macklin et al.
-/// 2019; see `substep/` and `deviatoric.rs`). The shape solve holds the shape
+/// 2019; see `substep.rs` and `deviatoric.rs`). The shape solve holds the shape
 /// and resists volume change as the material does; the impulses keep the volume within their
 /// tolerance of the rest volume. Too stiff for the substep, a tet becomes as stiff as the
 /// substep allows: it never explodes.
@@ -352,8 +352,16 @@ impl SoftBodyMaterial {
         ("hard_rubber", Self::HARD_RUBBER),
     ];
 
+    /// Whether any spring has a damper.
+    pub(crate) fn any_damping(&self) -> bool {
+        match self.elasticity {
+            Elasticity::Springs { damping, .. } => damping > 0.0,
+            Elasticity::Elastic(e) => e.damping > 0.0,
+        }
+    }
+
     /// Whether a step is cut into substeps: XPBD's own, or a physical material's under the
-    /// paper's impulses (`substep/`), with gravity and the shape solve in each. The paper's
+    /// paper's impulses (`substep.rs`), with gravity and the shape solve in each. The paper's
     /// springs, and the baseline, are integrated explicitly: their forces act once a step and
     /// the step is one substep.
     pub fn is_substepped(&self) -> bool {

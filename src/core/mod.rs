@@ -18,6 +18,7 @@ pub(crate) mod material;
 pub(crate) mod mesh_check;
 pub(crate) mod obj;
 pub(crate) mod parallel;
+#[cfg(test)]
 pub(crate) mod reference;
 pub(crate) mod roots;
 pub(crate) mod runaway;
@@ -26,6 +27,7 @@ pub(crate) mod soft_contacts;
 pub(crate) mod soft_lockstep;
 pub(crate) mod soft_records;
 pub(crate) mod substep;
+pub(crate) mod substep_plan;
 pub(crate) mod surface_mesh;
 pub(crate) mod tet_mesh;
 pub(crate) mod tetgen;

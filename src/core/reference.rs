@@ -20,13 +20,13 @@
 
 use glam::{DVec3, Vec3};
 
+use super::blocks::NO_TET;
 use super::body::SoftBodyState;
 use super::colliders::RigidSphereState;
 use super::geometry::{SIXTH, signed_volume};
 use super::impulses::{INVERTED_TET_GAMMA, RING_STEP_LIMIT, clamp_floor, constrained_push};
 use super::material::{ImpulseSettings, VolumeMethod};
 use super::roots::Cubic;
-use super::tet_mesh::NO_TET;
 
 /// A tet's signed volume, `(x_a - x_d) . grad_a`, in `f32` from its last corner (see the
 /// module's doc).
@@ -167,7 +167,7 @@ impl SoftBodyState {
     /// Section 5: the one-ring impulse of every vertex in turn, over a step (or substep) of
     /// `h`. `spheres` as for [`SoftBodyState::one_ring_impulses`]. Does nothing unless the body's
     /// method is the paper's with its one-ring pass on.
-    pub fn reference_one_ring_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
+    pub(crate) fn reference_one_ring_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
         let VolumeMethod::Impulses(settings) = self.material.method else {
             return;
         };
@@ -186,7 +186,7 @@ impl SoftBodyState {
 
     /// Section 4: every tet's own impulse in turn, scaled by `gamma`. Does nothing unless the
     /// body's method is the paper's with its per-tet pass on.
-    pub fn reference_per_tet_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
+    pub(crate) fn reference_per_tet_pass(&mut self, h: f32, spheres: &mut [RigidSphereState]) {
         let VolumeMethod::Impulses(settings) = self.material.method else {
             return;
         };
@@ -381,8 +381,8 @@ impl SoftBodyState {
     /// `d` with its push into a contact reduced to the share the particle keeps (see
     /// `contact_kept`): the cubic is solved for the motion the particle can make.
     fn reference_constrained(&self, i: usize, d: Vec3) -> Vec3 {
-        let n = self.contact_normals[i];
-        constrained_push(d, n, self.contact_kept[i], self.contact_second[i])
+        let n = self.contacts.normals[i];
+        constrained_push(d, n, self.contacts.kept[i], self.contacts.second[i])
     }
 
     /// Adds `dv` to particle `i`'s velocity and predicted position; a push into a sphere the particle
@@ -390,9 +390,9 @@ impl SoftBodyState {
     fn reference_velocity_change(&mut self, pass: &mut Pass, i: usize, dv: Vec3) {
         self.velocities[i] += dv;
         pass.predicted[i] += pass.h * dv;
-        let k = self.contact_sphere[i];
+        let k = self.contacts.sphere[i];
         if let Some(sphere_dv) = pass.sphere_dv.get_mut(k as usize) {
-            let n = self.contact_normals[i];
+            let n = self.contacts.normals[i];
             let into = dv.dot(n);
             if into < 0.0 {
                 *sphere_dv += n * into;

@@ -37,7 +37,7 @@ use glam::Vec3;
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::body::SoftBodyState;
-use super::boundary::{Boundary, SoftContactSettings, TriangleGrid, closest_barycentric};
+use super::boundary::{Boundary, TriangleGrid, closest_barycentric};
 use super::colliders::combined_friction;
 use super::contacts::MAX_DEPENETRATION_SPEED;
 use super::impulses::SOFT_CONTACT;
@@ -80,57 +80,40 @@ fn boundary_bounds(body: &SoftBodyState, ahead: f32) -> Option<Aabb> {
     (lo.is_finite() && hi.is_finite()).then(|| Aabb::new(lo, hi))
 }
 
-impl SoftBodyState {
-    /// How this body meets other soft bodies (`None`: it passes through them).
-    pub fn soft_contact_settings(&self) -> Option<SoftContactSettings> {
-        self.soft_contacts
+/// Records the particles the last soft-contact pass touched for the volume passes, which
+/// keep none of a push into the other body, as against the ground: pushes into it that the
+/// next contact pass would turn into velocity pump energy into a pile.
+fn record_soft_contacts(body: &mut SoftBodyState) {
+    body.scratch.soft_count += body.scratch.soft_touched.len() as u32;
+    body.met_soft_bodies |= !body.scratch.soft_touched.is_empty();
+    for k in 0..body.scratch.soft_touched.len() {
+        let (i, n) = body.scratch.soft_touched[k];
+        body.contacts.record(i as usize, n, 0.0, None);
+        body.contacts.sphere[i as usize] = SOFT_CONTACT;
     }
+}
 
-    /// Sets how this body meets other soft bodies (`None`: it passes through them).
-    pub fn set_soft_contact_settings(&mut self, settings: Option<SoftContactSettings>) {
-        self.soft_contacts = settings;
-    }
-
-    /// The body's boundary triangles and particles.
-    pub fn boundary(&self) -> &Boundary {
-        &self.boundary
-    }
-
-    /// Records the particles the last soft-contact pass touched for the volume passes, which
-    /// keep none of a push into the other body, as against the ground: pushes into it that the
-    /// next contact pass would turn into velocity pump energy into a pile.
-    fn record_soft_contacts(&mut self) {
-        self.scratch.soft_count += self.scratch.soft_touched.len() as u32;
-        self.met_soft_bodies |= !self.scratch.soft_touched.is_empty();
-        for k in 0..self.scratch.soft_touched.len() {
-            let (i, n) = self.scratch.soft_touched[k];
-            self.record_contact(i as usize, n, 0.0, None);
-            self.contact_sphere[i as usize] = SOFT_CONTACT;
+/// Hashes the boundary triangles where they are and `ahead` seconds on, grown by `margin`,
+/// for this pass. Returns the bounds of the boundary particles (`None`: the body takes no
+/// part in soft contacts).
+fn prepare_soft_contacts(body: &mut SoftBodyState, ahead: f32, margin: f32) -> Option<Aabb> {
+    body.boundary.reach = None;
+    body.soft_contacts?;
+    let reach = boundary_bounds(body, ahead)?;
+    let (positions, velocities) = (&body.positions, &body.velocities);
+    let bounds = body.boundary.triangles.iter().map(|t| {
+        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
+        for &i in t {
+            let (x, v) = (positions[i as usize], velocities[i as usize]);
+            lo = lo.min(x).min(x + ahead * v);
+            hi = hi.max(x).max(x + ahead * v);
         }
-    }
-
-    /// Hashes the boundary triangles where they are and `ahead` seconds on, grown by `margin`,
-    /// for this pass. Returns the bounds of the boundary particles (`None`: the body takes no
-    /// part in soft contacts).
-    fn prepare_soft_contacts(&mut self, ahead: f32, margin: f32) -> Option<Aabb> {
-        self.boundary.reach = None;
-        self.soft_contacts?;
-        let reach = boundary_bounds(self, ahead)?;
-        let (positions, velocities) = (&self.positions, &self.velocities);
-        let bounds = self.boundary.triangles.iter().map(|t| {
-            let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-            for &i in t {
-                let (x, v) = (positions[i as usize], velocities[i as usize]);
-                lo = lo.min(x).min(x + ahead * v);
-                hi = hi.max(x).max(x + ahead * v);
-            }
-            Aabb::new(lo, hi).loosened(margin)
-        });
-        let cell = self.boundary.longest_edge;
-        self.boundary.grid.build(cell, bounds);
-        self.boundary.reach = Some(reach);
-        Some(reach)
-    }
+        Aabb::new(lo, hi).loosened(margin)
+    });
+    let cell = body.boundary.longest_edge;
+    body.boundary.grid.build(cell, bounds);
+    body.boundary.reach = Some(reach);
+    Some(reach)
 }
 
 /// A body's particles as the narrow phase reads and writes them; for a self contact both
@@ -213,15 +196,15 @@ fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) -> Optio
         body.scratch.soft_pass += 1;
         // Only this substep's soft contacts constrain its volume impulses (an earlier one
         // keeps its normal, so that the particle stays listed once, but constrains nothing).
-        for &i in &body.touching {
-            if body.contact_sphere[i as usize] == SOFT_CONTACT {
-                body.contact_kept[i as usize] = 1.0;
-                body.contact_sphere[i as usize] = u32::MAX;
+        for &i in &body.contacts.touching {
+            if body.contacts.sphere[i as usize] == SOFT_CONTACT {
+                body.contacts.kept[i as usize] = 1.0;
+                body.contacts.sphere[i as usize] = u32::MAX;
             }
         }
     }
     let margin = body.soft_contacts.map_or(0.0, |s| s.thickness);
-    body.prepare_soft_contacts(phase.ahead(), margin)
+    prepare_soft_contacts(body, phase.ahead(), margin)
 }
 
 /// Contacts between two different bodies (both ways: `a`'s particles against `b`'s triangles,
@@ -292,8 +275,8 @@ fn resolve_pair(
             );
     a.scratch.soft_supports = contact_a.supports.into_inner();
     b.scratch.soft_supports = contact_b.supports.into_inner();
-    a.record_soft_contacts();
-    b.record_soft_contacts();
+    record_soft_contacts(a);
+    record_soft_contacts(b);
     // A sleeping body touched by a moving one wakes; two sleeping ones stay as they are.
     if contacts > 0 {
         if a.is_sleeping() && !b.is_sleeping() {
@@ -342,7 +325,7 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
         touched,
     );
     body.scratch.soft_supports = contact.supports.into_inner();
-    body.record_soft_contacts();
+    record_soft_contacts(body);
     contacts
 }
 

@@ -13,46 +13,8 @@ use super::body::SoftBodyState;
 use super::colliders::{ColliderInstance, RigidSphereState};
 use super::parallel::{Parallel, Serial, SharedSlice};
 use super::soft_contacts::{SoftContactPhase, soft_contact_pass};
-use super::soft_records::SoftReaction;
-use super::substep::{SubstepPlan, SubstepStage};
-
-impl SoftBodyState {
-    /// The impulses the other bodies gave this substep's volume impulses: what
-    /// `constrain_direction` took out of their pushes into another body (`soft_removed`),
-    /// recorded on the particle's support (its first, if it has several); returns their sum.
-    pub(crate) fn take_soft_pushes(&mut self) -> Vec3 {
-        let mut total = Vec3::ZERO;
-        for s in self.scratch.soft_supports.iter_mut() {
-            let i = s.particle as usize;
-            s.pushed = -self.masses[i] * self.scratch.soft_removed[i];
-            self.scratch.soft_removed[i] = Vec3::ZERO;
-            total += s.pushed;
-        }
-        total
-    }
-
-    /// Hands the pushes `take_soft_pushes` took out (scaled by the substep's energy scale `k`)
-    /// to the other bodies' triangles; they wait in `soft_reactions` until every body has
-    /// finished the substep (`apply_soft_reactions`).
-    pub(crate) fn hand_soft_pushes(&mut self, k: f32) {
-        for s in &self.scratch.soft_supports {
-            if s.pushed == Vec3::ZERO {
-                continue;
-            }
-            self.scratch.soft_reactions.push(SoftReaction {
-                particle: s.particle,
-                normal: s.normal,
-                partner: s.partner,
-                corners: s.corners,
-                weights: s.weights,
-                impulse: -k * s.pushed,
-                inv_mass: s.inv_mass,
-                friction: s.friction,
-            });
-        }
-        self.scratch.soft_supports.clear();
-    }
-}
+use super::substep::SubstepStage;
+use super::substep_plan::SubstepPlan;
 
 /// Applies the pushes every body's volume impulses handed on this substep to the other bodies'
 /// triangles, each with Coulomb friction for its normal part on the particle's slip over the

@@ -1,7 +1,8 @@
 //! What a body remembers within a step run together with other soft bodies: the contacts its
 //! volume impulses may push into ([`SoftSupport`]), the impulses it hands to the other bodies
-//! ([`SoftReaction`]), and where static friction holds each particle ([`SoftAnchor`]). Plain records, kept in the body's
-//! scratch (`soft_contacts.rs` writes them, `soft_lockstep.rs` reads them).
+//! ([`SoftReaction`], [`take_soft_pushes`], [`hand_soft_pushes`]), and where static friction
+//! holds each particle ([`SoftAnchor`]). Plain records, kept in the body's scratch
+//! (`soft_contacts.rs` writes them, the substeps hand them, `soft_lockstep.rs` applies them).
 
 use glam::Vec3;
 
@@ -65,4 +66,48 @@ impl SoftAnchor {
         weights: Vec3::ZERO,
         pass: 0,
     };
+}
+
+/// The impulses the other bodies gave a substep's volume impulses: what `constrain_direction`
+/// took out of their pushes into another body (`removed`, per particle of `masses`), recorded
+/// on the particle's support (its first, if it has several); returns their sum.
+pub(crate) fn take_soft_pushes(
+    supports: &mut [SoftSupport],
+    removed: &mut [Vec3],
+    masses: &[f32],
+) -> Vec3 {
+    let mut total = Vec3::ZERO;
+    for s in supports.iter_mut() {
+        let i = s.particle as usize;
+        s.pushed = -masses[i] * removed[i];
+        removed[i] = Vec3::ZERO;
+        total += s.pushed;
+    }
+    total
+}
+
+/// Hands the pushes `take_soft_pushes` took out (scaled by the substep's energy scale `k`) to
+/// the other bodies' triangles; they wait in `reactions` until every body has finished the
+/// substep (`apply_soft_reactions`).
+pub(crate) fn hand_soft_pushes(
+    supports: &mut Vec<SoftSupport>,
+    reactions: &mut Vec<SoftReaction>,
+    k: f32,
+) {
+    for s in supports.iter() {
+        if s.pushed == Vec3::ZERO {
+            continue;
+        }
+        reactions.push(SoftReaction {
+            particle: s.particle,
+            normal: s.normal,
+            partner: s.partner,
+            corners: s.corners,
+            weights: s.weights,
+            impulse: -k * s.pushed,
+            inv_mass: s.inv_mass,
+            friction: s.friction,
+        });
+    }
+    supports.clear();
 }

@@ -3,7 +3,7 @@
 
 use glam::Vec3;
 
-pub use super::blocks::{Blocks, Csr, NO_TET};
+pub use super::blocks::{Blocks, Csr};
 use super::geometry::{min_dihedral_deg, signed_volume};
 use super::mesh_check::{MeshDefects, find_defects};
 

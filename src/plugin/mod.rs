@@ -10,9 +10,12 @@ use bevy::platform::time::Instant;
 use bevy::prelude::*;
 use parry3d::math::Pose;
 
+use crate::components::settings::{SettingsQuery, core_settings};
 use crate::components::{
-    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyError, SoftBodyErrorKind,
-    SoftBodyGravity, SoftBodyStats, StaticCollider,
+    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
+    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity,
+    SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodyStats,
+    StaticCollider,
 };
 use crate::core::substep::{spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
@@ -37,14 +40,14 @@ pub use threads::{PARALLEL_PASS_MIN_TETS, SoftBodyThreads};
 pub use timing::{SoftBodyStageTimes, SoftBodyStepTime};
 
 /// The plugin's system sets, chained in this order: preparing, the stages of a step in the
-/// core's order ([`Stage::ORDER`]; `core/substep/` says what each does and why in this
+/// core's order ([`Stage::ORDER`]; `core/substep.rs` says what each does and why in this
 /// order), writing back. A game puts its own systems between them. The stages of a substep
 /// ([`SubstepStage::ORDER`]) run inside [`SoftBodySystems::Substeps`], body by body (as
 /// avian's substeps run inside its solver set); [`SoftBodyStepTime`] books each of them.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SoftBodySystems {
-    /// Place new bodies, clear last step's counters, apply pinned and driven particles, gather
-    /// the rigid spheres and static colliders.
+    /// Place new bodies, clear last step's counters, apply pinned and driven particles and the
+    /// settings components, gather the rigid spheres and static colliders.
     Prepare,
     /// [`Stage::Forces`]: the paper's springs with damping, gravity and the baseline's volume
     /// forces for bodies in one substep; kinematic particles set moving; the spheres' gravity.
@@ -127,6 +130,11 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<PinnedParticles>()
             .register_type::<DrivenParticles>()
             .register_type::<RigidSphere>()
+            .register_type::<SoftBodyContacts>()
+            .register_type::<SoftBodyContactsDisabled>()
+            .register_type::<SoftBodySleepThreshold>()
+            .register_type::<SoftBodySleepingDisabled>()
+            .register_type::<SoftBodyRunawayLimits>()
             .init_resource::<SolverSpheres>()
             .init_resource::<SoftContactGroups>()
             .init_resource::<SoftBodyStepTime>()
@@ -150,7 +158,7 @@ impl Plugin for SoftBodyPlugin {
         }
         app.add_systems(
             self.schedule,
-            (prepare, gather_spheres)
+            (prepare, apply_settings, gather_spheres)
                 .chain()
                 .in_set(SoftBodySystems::Prepare),
         );

@@ -146,6 +146,25 @@ pub(super) fn prepare(
     }
 }
 
+/// Applies each body's settings components (`components/settings.rs`), or the defaults where
+/// one is absent, to its state; a setting that did not change is left alone (changing the
+/// sleep settings wakes a body).
+pub(super) fn apply_settings(mut bodies: Query<(&mut SoftBody, SettingsQuery)>) {
+    for (mut body, settings) in &mut bodies {
+        let state = &mut body.state;
+        let (contacts, sleep, runaway) = core_settings(settings, state.shortest_edge);
+        if state.soft_contact_settings() != contacts {
+            state.set_soft_contact_settings(contacts);
+        }
+        if state.sleep_settings() != sleep {
+            state.set_sleep_settings(sleep);
+        }
+        if state.runaway_limits() != runaway {
+            state.set_runaway_limits(runaway);
+        }
+    }
+}
+
 /// The rigid spheres and static colliders as the solver sees them during one step, gathered
 /// once in [`SoftBodySystems::Prepare`]. The spheres are changed by the contact and volume passes
 /// (particles pressed against a sphere move it) and written back in [`SoftBodySystems::Writeback`];
@@ -379,8 +398,7 @@ pub(super) fn writeback(
     };
     // A single body on this thread, as in the stages (`for_each_body`): a parallel query hands
     // it to a pool thread, which may have to wake up and has little of the body in its caches
-    // (the soft cube's writeback, two threads, four runs: 50-78 us a step, inline 39-42; one
-    // thread 33-39). So do bodies kept to one thread.
+    // (slower than inline for the soft cube). So do bodies kept to one thread.
     if bodies.iter().len() < 2 || ComputePool::new(&threads).threads < 2 {
         bodies.iter_mut().for_each(write);
     } else {

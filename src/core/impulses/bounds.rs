@@ -42,7 +42,7 @@ pub(crate) struct SafeRadii {
     #[cfg(test)]
     pub(crate) disabled: bool,
     /// Whether the bounds were taken in this step (by its one-ring pass), for the per-tet
-    /// pass to go on from (see [`SoftBodyState::per_tet_impulses`]); cleared by `begin_step`.
+    /// pass to go on from (see `PassBody::per_tet_impulses`); cleared by `begin_step`.
     pub(crate) taken_this_step: bool,
     /// Whether the next bounds taken (by a one-ring pass) are to cover the tets' regions too,
     /// for the per-tet pass after it.

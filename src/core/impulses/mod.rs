@@ -53,7 +53,7 @@ pub(crate) mod tests;
 mod tet;
 
 use bounds::*;
-pub(crate) use bounds::{DriftTracking, PassWorker, SafeRadii};
+pub(crate) use passes::{PassBody, VolumePassScratch};
 use ring::RingWork;
 
 /// What the volume passes did in the last step (for statistics and tests).
@@ -103,7 +103,7 @@ pub enum ImpulseOutcome {
 pub(crate) const SOFT_CONTACT: u32 = u32::MAX - 1;
 
 /// What a volume pass does with one task's row of items (vertices or tet bundles; see
-/// `SoftBodyState::run_blocks`), given the row's place in the flat list of items.
+/// `PassBody::run_blocks`), given the row's place in the flat list of items.
 type BlockImpulses<'a> = dyn Fn(&VolumePass, &mut PassWorker, &[u32], usize) + Sync + 'a;
 
 /// Which clamp regions a pass uses.
@@ -214,7 +214,7 @@ pub(crate) struct VolumePass<'a> {
     walks: WalkMarks<'a>,
     far: FarDriftMarks<'a>,
     /// Per vertex, whether its ring was past its tolerance when last checked (see
-    /// [`SoftBodyState::ring_corrected`]); read and written by that ring's impulse only.
+    /// `VolumePassScratch::ring_corrected`); read and written by that ring's impulse only.
     ring_corrected: SharedSlice<'a, bool>,
 }
 

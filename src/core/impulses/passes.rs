@@ -3,11 +3,84 @@
 //! [`VolumePass`]'s files (`ring.rs`, `tet.rs`, `clamp.rs`), and the pass's findings added up
 //! into the body.
 
-use super::*;
-use crate::core::Blocks;
-use crate::core::body::SoftBodyState;
+use std::sync::Arc;
 
-impl SoftBodyState {
+use super::*;
+use crate::core::lanes::Point4;
+use crate::core::parallel::BlockFlags;
+use crate::core::tet_mesh::Blocks;
+
+/// What the volume passes keep in a body between passes and steps: their clamp bounds and
+/// what tracks them, one worker per block, the guess of which rings need correcting. Only
+/// saves work: every shortcut it allows gives the plain passes' result (the tests hold them).
+#[derive(Clone, Debug)]
+pub(crate) struct VolumePassScratch {
+    /// Bounds that let most impulses skip the neighbour clamp (see `bounds.rs`).
+    pub(crate) clamp_bounds: SafeRadii,
+    /// What the clamp bounds track per particle while a volume pass runs.
+    pub(crate) clamp_motion: DriftTracking,
+    /// One per block of the mesh: what each job of a volume pass owns.
+    pub(crate) pass_workers: Vec<PassWorker>,
+    /// Per vertex, whether its ring was past its tolerance when its impulse last checked it:
+    /// a guess of whether it will be again, which decides only how the check is computed,
+    /// never its result (see `VolumePass::ring_impulse`).
+    pub(crate) ring_corrected: Vec<bool>,
+}
+
+impl VolumePassScratch {
+    /// The passes' memory for `mesh`.
+    pub(crate) fn for_mesh(mesh: &TetMesh) -> Self {
+        VolumePassScratch {
+            clamp_bounds: Default::default(),
+            clamp_motion: DriftTracking::default(),
+            pass_workers: vec![PassWorker::for_mesh(mesh); mesh.blocks().count()],
+            ring_corrected: vec![false; mesh.vertex_count()],
+        }
+    }
+
+    /// At a step's start: no bounds taken in it yet.
+    pub(crate) fn begin_step(&mut self) {
+        self.clamp_bounds.taken_this_step = false;
+    }
+}
+
+/// A body as its volume passes see it: what they read, the velocities and predicted positions
+/// they change, and their own memory. The body lends its parts (`SoftBodyState::pass_body`).
+pub(crate) struct PassBody<'a> {
+    pub(crate) mesh: &'a Arc<TetMesh>,
+    pub(crate) method: VolumeMethod,
+    pub(crate) positions: &'a [Vec3],
+    pub(crate) inv_masses: &'a [f32],
+    pub(crate) velocities: &'a mut Vec<Vec3>,
+    pub(crate) contact_normals: &'a [Vec3],
+    pub(crate) contact_second: &'a [Vec3],
+    pub(crate) contact_kept: &'a [f32],
+    pub(crate) contact_sphere: &'a [u32],
+    pub(crate) touching: &'a [u32],
+    pub(crate) counters: &'a mut StepCounters,
+    /// Predicted positions `x + h v`, kept in step with every velocity change.
+    pub(crate) predicted: &'a mut Vec<Point4>,
+    /// Per-particle scratch, zero between uses.
+    pub(crate) per_particle: &'a mut Vec<Vec3>,
+    /// What the impulses' pushes into another soft body lost (see `soft_lockstep.rs`).
+    pub(crate) soft_removed: &'a mut Vec<Vec3>,
+    pub(crate) block_done: &'a BlockFlags,
+    pub(crate) passes: &'a mut VolumePassScratch,
+}
+
+impl PassBody<'_> {
+    /// Sets every predicted position to `x + h v`.
+    pub(crate) fn refresh_predicted(&mut self, h: f32) {
+        for ((xp, x), v) in self
+            .predicted
+            .iter_mut()
+            .zip(self.positions)
+            .zip(self.velocities.iter())
+        {
+            *xp = Point4::new(*x + h * *v);
+        }
+    }
+
     /// [`SubstepStage::OneRing`](crate::core::SubstepStage::OneRing): one impulse per vertex
     /// restoring the volume of its one-ring (section 5), on the predicted positions `x + h v`
     /// of a substep of `h`. Nothing for the baseline or when the one-ring switch is off.
@@ -22,7 +95,7 @@ impl SoftBodyState {
         spheres: &mut [RigidSphereState],
         parallel: &dyn Parallel,
     ) {
-        let VolumeMethod::Impulses(settings) = self.material.method else {
+        let VolumeMethod::Impulses(settings) = self.method else {
             return;
         };
         if !settings.one_ring {
@@ -32,7 +105,7 @@ impl SoftBodyState {
         let regions = settings.neighbour_clamp.then_some(ClampRegions::Rings);
         let mesh = self.mesh.clone();
         // The per-tet pass, if it runs, goes on from this pass's clamp bounds.
-        self.scratch.clamp_bounds.keep_for_tets = settings.per_tet && settings.gamma != 0.0;
+        self.passes.clamp_bounds.keep_for_tets = settings.per_tet && settings.gamma != 0.0;
         self.run_blocks(
             h,
             spheres,
@@ -54,14 +127,14 @@ impl SoftBodyState {
     /// [`SubstepStage::PerTet`](crate::core::SubstepStage::PerTet): one impulse per tet towards
     /// its own rest volume, scaled by `gamma` (section 4, end of section 5). Nothing for the
     /// baseline or when the per-tet switch is off. `spheres` and `parallel` as for
-    /// [`SoftBodyState::one_ring_impulses`].
+    /// [`PassBody::one_ring_impulses`].
     pub(crate) fn per_tet_impulses(
         &mut self,
         h: f32,
         spheres: &mut [RigidSphereState],
         parallel: &dyn Parallel,
     ) {
-        let VolumeMethod::Impulses(settings) = self.material.method else {
+        let VolumeMethod::Impulses(settings) = self.method else {
             return;
         };
         if !settings.per_tet || settings.gamma == 0.0 {
@@ -109,7 +182,7 @@ impl SoftBodyState {
     ) {
         self.reset_workers(spheres);
         #[cfg(test)]
-        let clamp_regions = clamp_regions.filter(|_| !self.scratch.clamp_bounds.disabled);
+        let clamp_regions = clamp_regions.filter(|_| !self.passes.clamp_bounds.disabled);
         let plan = self.plan_bounds(clamp_regions);
         self.run_pass_phases(h, parallel, clamp_regions, &plan, items, impulse);
         self.keep_bounds(clamp_regions, &plan);
@@ -135,39 +208,39 @@ impl SoftBodyState {
             ..
         } = *plan;
         let blocks = self.mesh.blocks();
-        let mesh = &*self.mesh;
-        let (inv_masses, contact_normals) = (&self.inv_masses[..], &self.contact_normals[..]);
-        let (contact_kept, contact_sphere) = (&self.contact_kept[..], &self.contact_sphere[..]);
+        let mesh: &TetMesh = self.mesh;
+        let (inv_masses, contact_normals) = (self.inv_masses, self.contact_normals);
+        let (contact_kept, contact_sphere) = (self.contact_kept, self.contact_sphere);
         let any_touching = !self.touching.is_empty();
-        let contact_second = second_contacts(&self.touching, &self.contact_second);
+        let contact_second = second_contacts(self.touching, self.contact_second);
         // SAFETY (for the view and every `SharedSlice` below): the pass's phases run one
         // after another; in a chunked phase each chunk writes its own tets', vertices' or
         // regions' entries; in a phase over the blocks a block runs after every block whose
         // one-ring or tets it shares (`waits_for`), and writes only the particles, tets and
         // block entries of its own items and their one-rings; each task has its own worker.
         let mut bounds = unsafe {
-            self.scratch
+            self.passes
                 .clamp_bounds
                 .view(clamp_regions.unwrap_or(ClampRegions::Rings))
         };
         bounds.ring_checks = ring_checks;
-        let velocities = unsafe { SharedSlice::new(&mut self.velocities) };
-        let predicted = unsafe { SharedSlice::new(&mut self.scratch.predicted) };
-        let scratch = unsafe { SharedSlice::new(&mut self.scratch.per_particle) };
-        let drift = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) };
-        let move_len = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) };
+        let velocities = unsafe { SharedSlice::new(self.velocities) };
+        let predicted = unsafe { SharedSlice::new(self.predicted) };
+        let scratch = unsafe { SharedSlice::new(self.per_particle) };
+        let drift = unsafe { SharedSlice::new(&mut self.passes.clamp_motion.drift) };
+        let move_len = unsafe { SharedSlice::new(&mut self.passes.clamp_motion.move_len) };
         let walks = WalkMarks {
-            walked: &self.scratch.clamp_motion.walked.0,
-            walks: &self.scratch.clamp_motion.walks.0,
+            walked: &self.passes.clamp_motion.walked.0,
+            walks: &self.passes.clamp_motion.walks.0,
         };
-        let block_drift = unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.block_drift) };
-        let ring_corrected = unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) };
-        let removed = unsafe { SharedSlice::new(&mut self.scratch.soft_removed) };
+        let block_drift = unsafe { SharedSlice::new(&mut self.passes.clamp_motion.block_drift) };
+        let ring_corrected = unsafe { SharedSlice::new(&mut self.passes.ring_corrected) };
+        let removed = unsafe { SharedSlice::new(self.soft_removed) };
         let far = FarDriftMarks {
-            marks: &self.scratch.clamp_motion.far_nearby.0,
-            pass: self.scratch.clamp_motion.pass_number,
+            marks: &self.passes.clamp_motion.far_nearby.0,
+            pass: self.passes.clamp_motion.pass_number,
         };
-        let workers = unsafe { SharedSlice::new(&mut self.scratch.pass_workers) };
+        let workers = unsafe { SharedSlice::new(&mut self.passes.pass_workers) };
         let waits_for = &mesh.blocks().waits_for;
         let count = items.len();
         // The clamp bounds are computed first, in chunks: the tets', then the vertices'
@@ -184,7 +257,7 @@ impl SoftBodyState {
             chunk_phase(chunked[2]),
             Phase {
                 tasks: count,
-                order: Some((waits_for, &self.scratch.block_done[..count])),
+                order: Some((waits_for, &self.block_done[..count])),
             },
         ];
         run_phases(parallel, &phases, &|phase, task| {
@@ -241,7 +314,7 @@ impl SoftBodyState {
 
     /// Clears every task's worker for a pass among `spheres`.
     fn reset_workers(&mut self, spheres: &[RigidSphereState]) {
-        for worker in &mut self.scratch.pass_workers {
+        for worker in &mut self.passes.pass_workers {
             worker.counters = StepCounters::default();
             worker.max_moved = 0.0;
             worker.sphere_dv.clear();
@@ -253,8 +326,8 @@ impl SoftBodyState {
     /// without the tets' regions and the rings' checks; the bounds reserved for it.
     fn plan_bounds(&mut self, clamp_regions: Option<ClampRegions>) -> BoundsPlan {
         let take_tet_regions =
-            clamp_regions == Some(ClampRegions::Tets) || self.scratch.clamp_bounds.keep_for_tets;
-        self.scratch.clamp_bounds.keep_for_tets = false;
+            clamp_regions == Some(ClampRegions::Tets) || self.passes.clamp_bounds.keep_for_tets;
+        self.passes.clamp_bounds.keep_for_tets = false;
         // A per-tet pass after its step's one-ring pass goes on from the bounds that pass took
         // (they hold as long as drifts are measured from where they were taken): it only
         // measures each particle's drift again. Taking them costs about as much as the
@@ -264,18 +337,16 @@ impl SoftBodyState {
         // whether it can go on from earlier bounds.
         let mut quiet_body = false;
         let carry = match clamp_regions {
-            Some(ClampRegions::Tets) => self.scratch.clamp_bounds.taken_this_step,
+            Some(ClampRegions::Tets) => self.passes.clamp_bounds.taken_this_step,
             Some(ClampRegions::Rings) => {
-                if self.scratch.clamp_bounds.kept {
-                    self.scratch
-                        .clamp_bounds
-                        .follow_translation(&self.scratch.predicted);
+                if self.passes.clamp_bounds.kept {
+                    self.passes.clamp_bounds.follow_translation(self.predicted);
                 }
                 let (carry, quiet) = self
-                    .scratch
+                    .passes
                     .clamp_bounds
-                    .still_hold(take_tet_regions, &self.scratch.predicted);
-                quiet_body = quiet as f32 >= QUIET_SHARE * self.scratch.predicted.len() as f32;
+                    .still_hold(take_tet_regions, self.predicted);
+                quiet_body = quiet as f32 >= QUIET_SHARE * self.predicted.len() as f32;
                 carry
             }
             None => false,
@@ -284,15 +355,15 @@ impl SoftBodyState {
         // within their tolerances (see `RingErrorBound`); the first such pass computes what it
         // needs from the bounds' start, in the bounds' first two phases.
         let ring_checks = carry && clamp_regions == Some(ClampRegions::Rings) && quiet_body;
-        let shapes = ring_checks && !self.scratch.clamp_bounds.ring_checks_ready;
+        let shapes = ring_checks && !self.passes.clamp_bounds.ring_checks_ready;
         if clamp_regions.is_some() {
-            self.scratch.clamp_bounds.reserve(
-                &self.mesh,
+            self.passes.clamp_bounds.reserve(
+                self.mesh,
                 self.mesh.blocks().count(),
-                &mut self.scratch.clamp_motion,
+                &mut self.passes.clamp_motion,
             );
-            self.scratch.clamp_bounds.active = true;
-            self.scratch.clamp_motion.next_pass();
+            self.passes.clamp_bounds.active = true;
+            self.passes.clamp_motion.next_pass();
         }
         BoundsPlan {
             take_tet_regions,
@@ -310,8 +381,8 @@ impl SoftBodyState {
             shapes,
             ..
         } = *plan;
-        self.scratch.clamp_bounds.active = false;
-        let bounds = &mut self.scratch.clamp_bounds;
+        self.passes.clamp_bounds.active = false;
+        let bounds = &mut self.passes.clamp_bounds;
         match (clamp_regions, carry) {
             (Some(ClampRegions::Rings), false) => {
                 bounds.taken_this_step = take_tet_regions;
@@ -341,7 +412,7 @@ impl SoftBodyState {
     /// Adds up the tasks' counters and sphere velocity changes, in task order.
     fn add_up_workers(&mut self, spheres: &mut [RigidSphereState]) {
         let c = &mut self.counters;
-        for worker in &self.scratch.pass_workers {
+        for worker in &self.passes.pass_workers {
             let w = &worker.counters;
             c.rings_corrected += w.rings_corrected;
             c.rings_without_root += w.rings_without_root;
@@ -361,13 +432,12 @@ impl SoftBodyState {
     #[cfg(test)]
     pub(crate) fn ring_impulse(
         &mut self,
-        _mesh: &TetMesh,
         p: usize,
         h: f32,
         settings: &ImpulseSettings,
         spheres: &mut [RigidSphereState],
     ) -> ImpulseOutcome {
-        let mut worker = PassWorker::for_mesh(&self.mesh);
+        let mut worker = PassWorker::for_mesh(self.mesh);
         worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
         // SAFETY: the view is used here, on this thread.
         let outcome = unsafe { self.single_view(h) }.ring_impulse(&mut worker, p, settings);
@@ -380,13 +450,12 @@ impl SoftBodyState {
     #[cfg(test)]
     pub(crate) fn tet_impulse(
         &mut self,
-        _mesh: &TetMesh,
         t: usize,
         h: f32,
         settings: &ImpulseSettings,
         spheres: &mut [RigidSphereState],
     ) -> ImpulseOutcome {
-        let mut worker = PassWorker::for_mesh(&self.mesh);
+        let mut worker = PassWorker::for_mesh(self.mesh);
         worker.sphere_dv.resize(spheres.len(), Vec3::ZERO);
         let (corners, rest) = (self.mesh.tets()[t], self.mesh.rest_volumes()[t]);
         // SAFETY: the view is used here, on this thread.
@@ -403,7 +472,7 @@ impl SoftBodyState {
 
     #[cfg(test)]
     fn finish_single(&mut self, worker: PassWorker, spheres: &mut [RigidSphereState]) {
-        self.counters = worker.counters;
+        *self.counters = worker.counters;
         for (sphere, dv) in spheres.iter_mut().zip(&worker.sphere_dv) {
             sphere.velocity += *dv;
         }
@@ -415,46 +484,46 @@ impl SoftBodyState {
     /// The view is used by one thread at a time.
     #[cfg(test)]
     unsafe fn single_view(&mut self, h: f32) -> VolumePass<'_> {
-        self.scratch
+        self.passes
             .clamp_motion
             .drift
-            .resize(self.scratch.predicted.len(), 0.0);
-        self.scratch
+            .resize(self.predicted.len(), 0.0);
+        self.passes
             .clamp_motion
             .move_len
-            .resize(self.scratch.predicted.len(), 0.0);
+            .resize(self.predicted.len(), 0.0);
         let tets = self.mesh.tet_count();
-        self.scratch
+        self.passes
             .clamp_motion
             .walked
             .0
             .resize_with(tets, || AtomicU32::new(0));
         VolumePass {
-            mesh: &self.mesh,
+            mesh: self.mesh,
             h,
-            inv_masses: &self.inv_masses,
-            contact_normals: &self.contact_normals,
-            contact_kept: &self.contact_kept,
-            contact_second: second_contacts(&self.touching, &self.contact_second),
-            contact_sphere: &self.contact_sphere,
-            removed: unsafe { SharedSlice::new(&mut self.scratch.soft_removed) },
+            inv_masses: self.inv_masses,
+            contact_normals: self.contact_normals,
+            contact_kept: self.contact_kept,
+            contact_second: second_contacts(self.touching, self.contact_second),
+            contact_sphere: self.contact_sphere,
+            removed: unsafe { SharedSlice::new(self.soft_removed) },
             any_touching: !self.touching.is_empty(),
             // SAFETY (for the view and every `SharedSlice`): this function's caller's promise.
-            bounds: unsafe { self.scratch.clamp_bounds.view(ClampRegions::Rings) },
-            velocities: unsafe { SharedSlice::new(&mut self.velocities) },
-            predicted: unsafe { SharedSlice::new(&mut self.scratch.predicted) },
-            scratch: unsafe { SharedSlice::new(&mut self.scratch.per_particle) },
-            drift: unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.drift) },
-            move_len: unsafe { SharedSlice::new(&mut self.scratch.clamp_motion.move_len) },
+            bounds: unsafe { self.passes.clamp_bounds.view(ClampRegions::Rings) },
+            velocities: unsafe { SharedSlice::new(self.velocities) },
+            predicted: unsafe { SharedSlice::new(self.predicted) },
+            scratch: unsafe { SharedSlice::new(self.per_particle) },
+            drift: unsafe { SharedSlice::new(&mut self.passes.clamp_motion.drift) },
+            move_len: unsafe { SharedSlice::new(&mut self.passes.clamp_motion.move_len) },
             walks: WalkMarks {
-                walked: &self.scratch.clamp_motion.walked.0,
-                walks: &self.scratch.clamp_motion.walks.0,
+                walked: &self.passes.clamp_motion.walked.0,
+                walks: &self.passes.clamp_motion.walks.0,
             },
             far: FarDriftMarks {
-                marks: &self.scratch.clamp_motion.far_nearby.0,
-                pass: self.scratch.clamp_motion.pass_number,
+                marks: &self.passes.clamp_motion.far_nearby.0,
+                pass: self.passes.clamp_motion.pass_number,
             },
-            ring_corrected: unsafe { SharedSlice::new(&mut self.scratch.ring_corrected) },
+            ring_corrected: unsafe { SharedSlice::new(&mut self.passes.ring_corrected) },
         }
     }
 }
@@ -545,7 +614,7 @@ fn bound_chunks(
     )
 }
 
-/// How a pass takes its clamp bounds (see `SoftBodyState::plan_bounds`).
+/// How a pass takes its clamp bounds (see `PassBody::plan_bounds`).
 #[derive(Clone, Copy)]
 struct BoundsPlan {
     /// Whether the tets' regions are taken (for a per-tet pass, or to keep for one).

@@ -59,7 +59,9 @@ fn every_impulse_conserves_momentum() {
     let mut applied = 0;
     for p in 0..body.positions.len() {
         let before = body.linear_momentum();
-        let outcome = body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, true), &mut []);
+        let outcome = body
+            .pass_body()
+            .ring_impulse(p, H, &exact(0.125, true), &mut []);
         let after = body.linear_momentum();
         if let ImpulseOutcome::Applied { .. } = outcome {
             applied += 1;
@@ -71,7 +73,8 @@ fn every_impulse_conserves_momentum() {
     }
     for t in 0..body.mesh.tet_count() {
         let before = body.linear_momentum();
-        body.tet_impulse(&body.mesh.clone(), t, H, &exact(0.125, true), &mut []);
+        body.pass_body()
+            .tet_impulse(t, H, &exact(0.125, true), &mut []);
         let after = body.linear_momentum();
         assert!(
             (after - before).length() < 1e-4,
@@ -95,7 +98,8 @@ fn ring_impulse_restores_the_ring_volume() {
             .map(|&t| body.mesh.rest_volumes()[t as usize])
             .sum();
         if let ImpulseOutcome::Applied { step, root, .. } =
-            body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, false), &mut [])
+            body.pass_body()
+                .ring_impulse(p, H, &exact(0.125, false), &mut [])
         {
             if step < root {
                 limited += 1;
@@ -120,7 +124,8 @@ fn tet_impulse_with_gamma_one_restores_the_tet_volume() {
     let mut body = shaken_body(1.0);
     for t in 0..body.mesh.tet_count() {
         if let ImpulseOutcome::Applied { .. } =
-            body.tet_impulse(&body.mesh.clone(), t, H, &exact(1.0, false), &mut [])
+            body.pass_body()
+                .tet_impulse(t, H, &exact(1.0, false), &mut [])
         {
             // gamma = 1 applies the whole root.
             let v0 = body.mesh.rest_volumes()[t];
@@ -139,7 +144,8 @@ fn clamp_keeps_touched_tets_at_or_above_half_their_rest_volume() {
     for p in 0..body.positions.len() {
         let before: Vec<f32> = (0..tets).map(|t| predicted_volume(&body, t)).collect();
         if let ImpulseOutcome::Applied { clamped: c, .. } =
-            body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, true), &mut [])
+            body.pass_body()
+                .ring_impulse(p, H, &exact(0.125, true), &mut [])
         {
             clamped += c as usize;
         }
@@ -157,7 +163,8 @@ fn clamp_keeps_touched_tets_at_or_above_half_their_rest_volume() {
     }
     for t in 0..tets {
         let before: Vec<f32> = (0..tets).map(|u| predicted_volume(&body, u)).collect();
-        body.tet_impulse(&body.mesh.clone(), t, H, &exact(0.125, true), &mut []);
+        body.pass_body()
+            .tet_impulse(t, H, &exact(0.125, true), &mut []);
         for (u, &before_u) in before.iter().enumerate() {
             let v0 = body.mesh.rest_volumes()[u];
             let floor = clamp_floor(before_u, v0);
@@ -324,16 +331,24 @@ fn the_guess_of_which_rings_are_corrected_changes_nothing() {
     for strength in [0.05, 0.5, 4.0] {
         let mut none = shaken_body(strength);
         let mut all = shaken_body(strength);
-        all.scratch.ring_corrected.fill(true);
+        all.volume_passes.ring_corrected.fill(true);
         for body in [&mut none, &mut all] {
             for _ in 0..3 {
                 passes_with_a_push_between(body, 7, strength);
             }
         }
         assert_eq!(none.velocities, all.velocities, "strength {strength}");
-        assert_eq!(none.scratch.ring_corrected, all.scratch.ring_corrected);
-        let corrected = none.scratch.ring_corrected.iter().filter(|&&c| c).count();
-        assert!(corrected > 0 && corrected < none.scratch.ring_corrected.len());
+        assert_eq!(
+            none.volume_passes.ring_corrected,
+            all.volume_passes.ring_corrected
+        );
+        let corrected = none
+            .volume_passes
+            .ring_corrected
+            .iter()
+            .filter(|&&c| c)
+            .count();
+        assert!(corrected > 0 && corrected < none.volume_passes.ring_corrected.len());
     }
 }
 
@@ -342,7 +357,7 @@ fn the_clamp_shortcut_changes_nothing() {
     for strength in [0.05, 0.5, 4.0] {
         let mut fast = shaken_body(strength);
         let mut exact = shaken_body(strength);
-        exact.scratch.clamp_bounds.disabled = true;
+        exact.volume_passes.clamp_bounds.disabled = true;
         for body in [&mut fast, &mut exact] {
             passes_with_a_push_between(body, 7, strength);
         }
@@ -370,7 +385,7 @@ fn the_per_tet_pass_going_on_from_the_ring_passs_bounds_changes_nothing() {
             },
         );
         let mut exact = fast.clone();
-        exact.scratch.clamp_bounds.disabled = true;
+        exact.volume_passes.clamp_bounds.disabled = true;
         for body in [&mut fast, &mut exact] {
             passes_with_a_push_between(body, 5, strength);
         }
@@ -398,8 +413,8 @@ fn one_ring_passes_going_on_from_earlier_steps_bounds_change_nothing() {
         let mut fast = shaken_body(strength);
         let mut exact = fast.clone();
         let mut by_rule = fast.clone();
-        fast.scratch.clamp_bounds.always_carry = true;
-        exact.scratch.clamp_bounds.disabled = true;
+        fast.volume_passes.clamp_bounds.always_carry = true;
+        exact.volume_passes.clamp_bounds.disabled = true;
         for step in 0..8 {
             for body in [&mut fast, &mut exact, &mut by_rule] {
                 body.begin_step();
@@ -418,8 +433,8 @@ fn one_ring_passes_going_on_from_earlier_steps_bounds_change_nothing() {
             }
             clamped += exact.counters().rings_clamped + exact.counters().tets_clamped;
         }
-        carried += fast.scratch.clamp_bounds.carried_passes;
-        let by_rule = by_rule.scratch.clamp_bounds.carried_passes;
+        carried += fast.volume_passes.clamp_bounds.carried_passes;
+        let by_rule = by_rule.volume_passes.clamp_bounds.carried_passes;
         if strength < 0.1 {
             assert!(by_rule > 0, "{strength}: a gentle body never went on");
         } else if strength > 1.0 {
@@ -447,7 +462,7 @@ fn a_body_moving_as_a_whole_goes_on_from_its_bounds() {
         *v += Vec3::new(1.5, -4.0, 0.5);
     }
     let mut exact = by_rule.clone();
-    exact.scratch.clamp_bounds.disabled = true;
+    exact.volume_passes.clamp_bounds.disabled = true;
     for step in 0..8 {
         for body in [&mut by_rule, &mut exact] {
             body.begin_step();
@@ -459,7 +474,7 @@ fn a_body_moving_as_a_whole_goes_on_from_its_bounds() {
         assert_eq!(by_rule.positions, exact.positions, "step {step}");
     }
     // Eight passes: the first takes the bounds, the others may go on from them.
-    let carried = by_rule.scratch.clamp_bounds.carried_passes;
+    let carried = by_rule.volume_passes.clamp_bounds.carried_passes;
     assert!(carried >= 5, "{carried} of 7 passes went on");
     assert!(
         by_rule.counters().clamps_skipped > 0,
@@ -488,7 +503,7 @@ fn rings_known_within_their_tolerances_change_nothing() {
             *v += moving;
         }
         let mut exact = fast.clone();
-        exact.scratch.clamp_bounds.disabled = true;
+        exact.volume_passes.clamp_bounds.disabled = true;
         let (mut known, mut checked, mut kicked_rings) = (0, 0, 0);
         for step in 0..16 {
             for body in [&mut fast, &mut exact] {
@@ -538,7 +553,7 @@ fn rings_known_within_their_tolerances_change_nothing() {
 #[test]
 fn ring_checks_are_ready_only_once_computed_for_their_bounds() {
     let mut body = shaken_body(0.3);
-    body.scratch.clamp_bounds.always_carry = true;
+    body.volume_passes.clamp_bounds.always_carry = true;
     let first = (body.positions.clone(), body.velocities.clone());
     for step in 0..7 {
         body.begin_step();
@@ -546,16 +561,16 @@ fn ring_checks_are_ready_only_once_computed_for_their_bounds() {
             // Back where the bounds were taken: no particle has drifted, the body is quiet.
             (body.positions, body.velocities) = first.clone();
         }
-        let carried_before = body.scratch.clamp_bounds.carried_passes;
+        let carried_before = body.volume_passes.clamp_bounds.carried_passes;
         body.one_ring_impulses(H, &mut [], &Serial);
         body.per_tet_impulses(H, &mut [], &Serial);
         body.integrate_positions(H, &Serial);
-        let carried = body.scratch.clamp_bounds.carried_passes > carried_before;
+        let carried = body.volume_passes.clamp_bounds.carried_passes > carried_before;
         assert!(
             step == 0 || carried,
             "step {step}: the bounds were taken again"
         );
-        let ready = body.scratch.clamp_bounds.ring_checks_ready;
+        let ready = body.volume_passes.clamp_bounds.ring_checks_ready;
         if step < 6 {
             assert_eq!(body.counters().ring_checks_skipped, 0, "step {step}");
             assert!(
@@ -626,7 +641,7 @@ fn impulses_near_a_far_drift_are_clamped_as_without_bounds() {
             fast.velocities[thrown] += throw;
         }
         let mut exact = fast.clone();
-        exact.scratch.clamp_bounds.disabled = true;
+        exact.volume_passes.clamp_bounds.disabled = true;
         for body in [&mut fast, &mut exact] {
             body.begin_step();
             body.one_ring_impulses(H, &mut [], &Serial);
@@ -651,10 +666,12 @@ fn kinematic_particles_are_not_moved() {
     body.set_kinematic(0, body.positions[0]).unwrap();
     body.refresh_predicted(H);
     for p in 0..body.positions.len() {
-        body.ring_impulse(&body.mesh.clone(), p, H, &exact(0.125, true), &mut []);
+        body.pass_body()
+            .ring_impulse(p, H, &exact(0.125, true), &mut []);
     }
     for t in 0..body.mesh.tet_count() {
-        body.tet_impulse(&body.mesh.clone(), t, H, &exact(0.125, true), &mut []);
+        body.pass_body()
+            .tet_impulse(t, H, &exact(0.125, true), &mut []);
     }
     assert_eq!(body.velocities[0], v_before);
 }
@@ -691,20 +708,20 @@ fn a_ring_within_tolerance_is_corrected_only_for_a_tet_past_the_ring_tet_toleran
         worst > paper.tolerance && worst < paper.ring_tet_tolerance,
         "{worst}"
     );
-    let outcome = body.ring_impulse(&body.mesh.clone(), p, H, &paper, &mut []);
+    let outcome = body.pass_body().ring_impulse(p, H, &paper, &mut []);
     assert!(matches!(outcome, ImpulseOutcome::Skipped), "{outcome:?}");
     // The rule before the ring tet tolerance: any tet past the tolerance.
     let before = ImpulseSettings {
         ring_tet_tolerance: paper.tolerance,
         ..paper
     };
-    let outcome = body.ring_impulse(&body.mesh.clone(), p, H, &before, &mut []);
+    let outcome = body.pass_body().ring_impulse(p, H, &before, &mut []);
     assert!(!matches!(outcome, ImpulseOutcome::Skipped), "{outcome:?}");
 
     let (mut body, p, ring_error, worst) = ring_with_centre_moved(0.002);
     assert!(ring_error < 0.1 * paper.tolerance, "{ring_error}");
     assert!(worst > paper.ring_tet_tolerance, "{worst}");
-    let outcome = body.ring_impulse(&body.mesh.clone(), p, H, &paper, &mut []);
+    let outcome = body.pass_body().ring_impulse(p, H, &paper, &mut []);
     assert!(!matches!(outcome, ImpulseOutcome::Skipped), "{outcome:?}");
 }
 

@@ -38,12 +38,14 @@ use glam::Vec3;
 use super::body::SoftBodyState;
 use super::colliders::{ColliderInstance, RigidSphereState};
 use super::deviatoric::{project_tet_shapes, refresh_shape_bundles};
+use super::forces::{ForceBody, explicit_forces};
 use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};
 use super::parallel::{Parallel, Serial};
 
-pub(crate) mod plan;
-pub(crate) use plan::SubstepPlan;
+use super::soft_records::{hand_soft_pushes, take_soft_pushes};
+use super::substep_plan::SubstepPlan;
+use super::xpbd::{EdgeConstraints, project_edges, project_volumes};
 
 /// A stage of a step, in the order [`Stage::ORDER`]; see the module's documentation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -202,7 +204,7 @@ impl SoftBodyState {
         // dampers on the velocities (the paper's springs).
         let (shape_damping, dampers) = match self.material.elasticity {
             Elasticity::Elastic(e) => (e.damping / hs, false),
-            Elasticity::Springs { .. } => (0.0, self.any_damping()),
+            Elasticity::Springs { .. } => (0.0, self.material.any_damping()),
         };
         // A physical material under the impulses keeps its shape per tet, unless its plastic
         // springs are the edges (see `ElasticSettings`).
@@ -402,10 +404,21 @@ impl SoftBodyState {
                 hs * hs,
                 plan.shape_damping,
             ),
-            None => self.project_edges(hs * hs, plan.shape_damping),
+            None => project_edges(
+                &mut self.positions,
+                &self.scratch.predicted,
+                &self.mesh,
+                &self.inv_masses,
+                EdgeConstraints {
+                    rest: &self.springs.rest,
+                    compliance: &self.springs.compliance,
+                },
+                hs * hs,
+                plan.shape_damping,
+            ),
         }
         if plan.volumes {
-            self.project_volumes();
+            project_volumes(&mut self.positions, &self.mesh, &self.inv_masses);
         }
     }
 
@@ -455,7 +468,13 @@ impl SoftBodyState {
     fn substep_damping(&mut self, plan: &SubstepPlan) {
         let hs = plan.hs;
         if plan.dampers {
-            self.damp_springs(hs);
+            self.springs.damp(
+                &self.mesh,
+                &self.positions,
+                &self.inv_masses,
+                &mut self.velocities,
+                hs,
+            );
         }
         let drag = self.material.linear_damping;
         if drag > 0.0 {
@@ -495,7 +514,11 @@ impl SoftBodyState {
         // `push`: what the static colliders pushed back, which gets its friction
         // (`support_friction`). Pushes into another body come out here, to be handed to it
         // (`soft_support`).
-        let soft_push = self.take_soft_pushes();
+        let soft_push = take_soft_pushes(
+            &mut self.scratch.soft_supports,
+            &mut self.scratch.soft_removed,
+            &self.masses,
+        );
         let (mut along, mut squared, mut push) = (0.0f64, 0.0f64, -soft_push);
         for ((&v, &before), &m) in self
             .velocities
@@ -513,16 +536,81 @@ impl SoftBodyState {
         } else {
             1.0
         };
-        let weight = self.static_contact_weight();
+        let weight = self.contacts.static_contact_weight(&self.masses);
         for i in 0..self.velocities.len() {
             let before = self.scratch.substep_velocities[i];
             let full = self.velocities[i];
             let v = before + k * (full - before);
-            let friction = self.support_friction(push, weight, i, v);
+            let friction = self.contacts.support_friction(push, weight, i, v);
             self.positions[i] += hs * (full + friction);
             self.velocities[i] = v + friction;
         }
-        self.hand_soft_pushes(k);
+        hand_soft_pushes(
+            &mut self.scratch.soft_supports,
+            &mut self.scratch.soft_reactions,
+            k,
+        );
+    }
+
+    /// [`Stage::Forces`] over a step of `h` under `gravity`: the paper's explicit springs'
+    /// forces (`forces.rs`); for a body in substeps, whose gravity and shape act in them, only
+    /// the kinematic particles set moving to their targets. The body's blocks are run by
+    /// `parallel`.
+    pub(crate) fn apply_forces(&mut self, h: f32, gravity: Vec3, parallel: &dyn Parallel) {
+        self.gravity = gravity;
+        if !self.material.is_substepped() {
+            let body = ForceBody {
+                mesh: &self.mesh,
+                material: &self.material,
+                positions: &self.positions,
+                inv_masses: &self.inv_masses,
+                velocities: &mut self.velocities,
+                per_particle: &mut self.scratch.per_particle,
+                block_done: &self.scratch.block_done,
+                springs: &mut self.springs,
+            };
+            explicit_forces(body, h, gravity, parallel);
+        }
+        for &(i, target) in &self.kinematic {
+            let i = i as usize;
+            self.velocities[i] = (target - self.positions[i]) / h;
+        }
+    }
+
+    /// [`Stage::Plasticity`]: plastic flow of the spring rest lengths (nothing without
+    /// plasticity, or asleep), driven by the strain of the positions the step started from:
+    /// the strain the paper's springs' forces saw in the step (they act once, at its start),
+    /// and one definition for every material whatever its substeps.
+    pub(crate) fn apply_plasticity(&mut self, h: f32) {
+        let Some(p) = self.material.plasticity else {
+            return;
+        };
+        if !self.sleep.asleep {
+            self.springs
+                .flow(&self.mesh, &self.previous_positions, p, h);
+        }
+    }
+
+    /// [`SubstepStage::OneRing`]'s impulses over a substep of `h` (see
+    /// `PassBody::one_ring_impulses`).
+    pub(crate) fn one_ring_impulses(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        self.pass_body().one_ring_impulses(h, spheres, parallel);
+    }
+
+    /// [`SubstepStage::PerTet`]'s impulses over a substep of `h` (see
+    /// `PassBody::per_tet_impulses`).
+    pub(crate) fn per_tet_impulses(
+        &mut self,
+        h: f32,
+        spheres: &mut [RigidSphereState],
+        parallel: &dyn Parallel,
+    ) {
+        self.pass_body().per_tet_impulses(h, spheres, parallel);
     }
 
     /// Starts or stops timing this body's substep stages (the plugin times them).

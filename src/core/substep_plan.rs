@@ -1,5 +1,5 @@
-//! What the substep loop keeps in a body between its stages: the step's plan and the clock
-//! of its stages. Apart from the loop (`mod.rs`) so that the body can hold them.
+//! What the substep loop (`substep.rs`) keeps in a body between its stages: the step's plan
+//! and the clock of its stages. Apart from the loop so that the body can hold them.
 
 use std::time::Instant;
 
@@ -32,11 +32,11 @@ pub(crate) struct SubstepClock {
 }
 
 impl SubstepClock {
-    pub(super) fn start(&self) -> Option<Instant> {
+    pub(crate) fn start(&self) -> Option<Instant> {
         self.on.then(Instant::now)
     }
 
-    pub(super) fn stop(&mut self, stage: usize, started: Option<Instant>) {
+    pub(crate) fn stop(&mut self, stage: usize, started: Option<Instant>) {
         if let Some(started) = started {
             self.seconds[stage] += started.elapsed().as_secs_f64();
         }
