@@ -11,8 +11,8 @@
 //!    for a physical material ([`SoftBodyState::plan_substeps`]), XPBD's own count, and one
 //!    substep of the whole step for the paper's springs. The spheres meet the static colliders
 //!    before the substeps.
-//! 3. [`Stage::Plasticity`]: the plastic springs' flow (section 6), on the positions the
-//!    substeps ended at.
+//! 3. [`Stage::Plasticity`]: the plastic springs' flow (section 6), driven by the strain of
+//!    the positions the step started from.
 //! 4. [`Stage::Finish`]: the spheres meet the static colliders again and move; each body's
 //!    sleep is updated and a body that ran away is caught (`runaway.rs`); bodies stepped
 //!    together get a last soft-contact pass.
@@ -42,7 +42,6 @@ use super::forces::{ForceBody, explicit_forces};
 use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};
 use super::parallel::{Parallel, Serial};
-
 use super::soft_records::{hand_soft_pushes, take_soft_pushes};
 use super::substep_plan::SubstepPlan;
 use super::xpbd::{EdgeConstraints, project_edges, project_volumes};
