@@ -44,6 +44,11 @@ pub struct Boundary {
     /// The bounds of the boundary particles over the current pass (`None`: the body takes no
     /// part in it).
     pub(crate) reach: Option<Aabb>,
+    /// This body's particles that may meet another body's triangles within the step, found
+    /// once a step for its substeps' contact passes (`soft_broad_phase.rs`).
+    pub(crate) candidates: SoftCandidates,
+    /// Where the boundary particles were when the candidates were found, and how far they hold.
+    pub(crate) paths: CandidatePaths,
 }
 
 impl Boundary {
@@ -71,6 +76,8 @@ impl Boundary {
             longest_edge,
             grid,
             reach: None,
+            candidates: SoftCandidates::default(),
+            paths: CandidatePaths::default(),
         }
     }
 
@@ -92,6 +99,8 @@ pub struct TriangleGrid {
     items: Vec<u32>,
     /// Scratch: (bucket, triangle) pairs before sorting.
     pairs: Vec<(u32, u32)>,
+    /// Each triangle's bounds as hashed.
+    bounds: Vec<Aabb>,
 }
 
 impl TriangleGrid {
@@ -102,6 +111,7 @@ impl TriangleGrid {
             starts: Vec::with_capacity(16 * triangles + 1),
             items: Vec::with_capacity(8 * triangles),
             pairs: Vec::with_capacity(8 * triangles),
+            bounds: Vec::with_capacity(triangles),
         }
     }
 
@@ -126,8 +136,12 @@ impl TriangleGrid {
     pub(crate) fn build(&mut self, cell: f32, bounds: impl Iterator<Item = Aabb>) {
         self.cell = cell.max(1e-6);
         self.pairs.clear();
-        for (t, b) in bounds.enumerate() {
-            let (lo, hi) = (self.cell_of(b.mins), self.cell_of(b.maxs));
+        self.bounds.clear();
+        self.bounds.extend(bounds);
+        let cell = self.cell;
+        let cell_of = |p: Vec3| (p / cell).floor().as_ivec3();
+        for (t, b) in self.bounds.iter().enumerate() {
+            let (lo, hi) = (cell_of(b.mins), cell_of(b.maxs));
             for x in lo.x..=hi.x {
                 for y in lo.y..=hi.y {
                     for z in lo.z..=hi.z {
@@ -161,6 +175,11 @@ impl TriangleGrid {
         self.starts[0] = 0;
     }
 
+    /// Triangle `t`'s bounds as hashed.
+    pub(crate) fn bounds(&self, t: u32) -> &Aabb {
+        &self.bounds[t as usize]
+    }
+
     /// Calls `visit` with the triangles hashed into the cells `bounds` overlaps (a triangle may
     /// come more than once, and hash collisions bring triangles from elsewhere: the narrow phase
     /// decides).
@@ -180,6 +199,105 @@ impl TriangleGrid {
                 }
             }
         }
+    }
+}
+
+/// One body's candidates against one other body (or itself): a run of [`SoftCandidates`]'s
+/// particles.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CandidateList {
+    /// The slot of the body whose triangles the particles may meet.
+    pub(crate) partner: u32,
+    /// The list's particles, a range of [`SoftCandidates::particles`].
+    pub(crate) start: u32,
+    pub(crate) end: u32,
+}
+
+/// A particle that may meet another body's triangles within the step, and which: a range of
+/// [`SoftCandidates`]'s triangles.
+#[derive(Clone, Copy, Debug)]
+pub(crate) struct CandidateParticle {
+    pub(crate) particle: u32,
+    pub(crate) start: u32,
+    pub(crate) end: u32,
+}
+
+/// The particles of a body that may meet other bodies' triangles within a step, each with the
+/// triangles it may meet, listed by partner: found once a step from where the particles and
+/// the triangles move in it (`soft_broad_phase.rs`), so that a substep's contact pass looks
+/// only at these, without a grid. Reused from step to step.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct SoftCandidates {
+    pub(crate) lists: Vec<CandidateList>,
+    pub(crate) particles: Vec<CandidateParticle>,
+    pub(crate) triangles: Vec<u32>,
+}
+
+/// Per particle (boundary particles only): where it was when the step's candidates were found,
+/// and how far from there they hold for it (`soft_broad_phase.rs`).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct CandidatePaths {
+    pub(crate) start: Vec<Vec3>,
+    pub(crate) radius: Vec<f32>,
+}
+
+impl SoftCandidates {
+    /// Forgets the last step's candidates.
+    pub(crate) fn clear(&mut self) {
+        self.lists.clear();
+        self.particles.clear();
+        self.triangles.clear();
+    }
+
+    /// Starts the list of candidates against `partner`.
+    pub(crate) fn begin(&mut self, partner: u32) {
+        let at = self.particles.len() as u32;
+        self.lists.push(CandidateList {
+            partner,
+            start: at,
+            end: at,
+        });
+    }
+
+    /// Adds `particle` to the current list with the triangles `near` adds (each kept once); a
+    /// particle with none is left out.
+    pub(crate) fn push(&mut self, particle: u32, near: impl FnOnce(&mut Vec<u32>)) {
+        let start = self.triangles.len();
+        near(&mut self.triangles);
+        if self.triangles.len() == start {
+            return;
+        }
+        let run = &mut self.triangles[start..];
+        run.sort_unstable();
+        let mut kept = 1;
+        for k in 1..run.len() {
+            if run[k] != run[kept - 1] {
+                run[kept] = run[k];
+                kept += 1;
+            }
+        }
+        self.triangles.truncate(start + kept);
+        self.particles.push(CandidateParticle {
+            particle,
+            start: start as u32,
+            end: self.triangles.len() as u32,
+        });
+        if let Some(list) = self.lists.last_mut() {
+            list.end = self.particles.len() as u32;
+        }
+    }
+
+    /// The candidates against `partner` (empty if none).
+    pub(crate) fn against(&self, partner: u32) -> &[CandidateParticle] {
+        self.lists
+            .iter()
+            .find(|l| l.partner == partner)
+            .map_or(&[], |l| &self.particles[l.start as usize..l.end as usize])
+    }
+
+    /// The triangles `particle` may meet.
+    pub(crate) fn triangles_of(&self, particle: &CandidateParticle) -> &[u32] {
+        &self.triangles[particle.start as usize..particle.end as usize]
     }
 }
 

@@ -23,6 +23,7 @@ pub(crate) mod reference;
 pub(crate) mod roots;
 pub(crate) mod runaway;
 pub(crate) mod sleep;
+pub(crate) mod soft_broad_phase;
 pub(crate) mod soft_contacts;
 pub(crate) mod soft_lockstep;
 pub(crate) mod soft_records;

@@ -24,12 +24,8 @@
 //! Coulomb friction (`soft_lockstep.rs`), so a squashed jelly in a pile keeps its volume and
 //! holds up the one above it.
 //!
-//! Broad phase: bodies whose bounds overlap; within a pair, each body's boundary triangles are
-//! hashed into a uniform grid (cells of about a triangle's size, built once per pass,
-//! [`TriangleGrid`]) and a particle looks only in the cells its motion covers, so the cost
-//! grows with the boundary particles in the overlap, not with their product. Self contacts
-//! skip the triangles within two rest edges of the particle at rest: those are its neighbours
-//! on the same surface, not a fold.
+//! The broad phase (`soft_broad_phase.rs`): the predicted and final passes search each body's
+//! grid of triangles; the substeps' passes read the candidates found once a step.
 
 use std::ops::DerefMut;
 
@@ -37,12 +33,15 @@ use glam::Vec3;
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::body::SoftBodyState;
-use super::boundary::{Boundary, TriangleGrid, closest_barycentric};
+use super::boundary::{
+    Boundary, CandidateParticle, SoftCandidates, TriangleGrid, closest_barycentric,
+};
 use super::colliders::combined_friction;
 use super::contacts::MAX_DEPENETRATION_SPEED;
 use super::impulses::SOFT_CONTACT;
 use super::lanes::Point4;
 use super::parallel::SharedSlice;
+use super::soft_broad_phase::{boundary_bounds, prepare_soft_contacts};
 use super::soft_records::{SoftAnchor, SoftSupport};
 
 /// Which of a step's two soft-contact passes runs (see the module's documentation).
@@ -68,18 +67,6 @@ impl SoftContactPhase {
     }
 }
 
-/// The bounds of where `body`'s boundary particles are now and `ahead` seconds on.
-fn boundary_bounds(body: &SoftBodyState, ahead: f32) -> Option<Aabb> {
-    let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-    for &i in &body.boundary.particles {
-        let (x, v) = (body.positions[i as usize], body.velocities[i as usize]);
-        let end = x + ahead * v;
-        lo = lo.min(x).min(end);
-        hi = hi.max(x).max(end);
-    }
-    (lo.is_finite() && hi.is_finite()).then(|| Aabb::new(lo, hi))
-}
-
 /// Records the particles the last soft-contact pass touched for the volume passes, which
 /// keep none of a push into the other body, as against the ground: pushes into it that the
 /// next contact pass would turn into velocity pump energy into a pile.
@@ -91,29 +78,6 @@ fn record_soft_contacts(body: &mut SoftBodyState) {
         body.contacts.record(i as usize, n, 0.0, None);
         body.contacts.sphere[i as usize] = SOFT_CONTACT;
     }
-}
-
-/// Hashes the boundary triangles where they are and `ahead` seconds on, grown by `margin`,
-/// for this pass. Returns the bounds of the boundary particles (`None`: the body takes no
-/// part in soft contacts).
-fn prepare_soft_contacts(body: &mut SoftBodyState, ahead: f32, margin: f32) -> Option<Aabb> {
-    body.boundary.reach = None;
-    body.soft_contacts?;
-    let reach = boundary_bounds(body, ahead)?;
-    let (positions, velocities) = (&body.positions, &body.velocities);
-    let bounds = body.boundary.triangles.iter().map(|t| {
-        let (mut lo, mut hi) = (Vec3::INFINITY, Vec3::NEG_INFINITY);
-        for &i in t {
-            let (x, v) = (positions[i as usize], velocities[i as usize]);
-            lo = lo.min(x).min(x + ahead * v);
-            hi = hi.max(x).max(x + ahead * v);
-        }
-        Aabb::new(lo, hi).loosened(margin)
-    });
-    let cell = body.boundary.longest_edge;
-    body.boundary.grid.build(cell, bounds);
-    body.boundary.reach = Some(reach);
-    Some(reach)
 }
 
 /// A body's particles as the narrow phase reads and writes them; for a self contact both
@@ -154,7 +118,9 @@ impl<'a> Arrays<'a> {
 }
 
 /// One pass of soft contacts among `bodies` (every pair whose bounds overlap, and each body
-/// with itself where it asks for it), in the order of the slice. Returns the contacts.
+/// with itself where it asks for it), in the order of the slice. A substep's pass reads the
+/// step's candidates ([`gather_soft_candidates`](super::soft_broad_phase::gather_soft_candidates),
+/// which must have run this step); the others search a grid. Returns the contacts.
 pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
     bodies: &mut [B],
     phase: SoftContactPhase,
@@ -162,33 +128,40 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
     for body in bodies.iter_mut() {
         prepare_soft_pass(body, phase);
     }
+    let listed = phase == SoftContactPhase::Substep;
     let mut contacts = 0;
     for a in 0..bodies.len() {
         contacts += resolve_self(&mut bodies[a], phase, a as u32);
         for b in a + 1..bodies.len() {
             let (left, right) = bodies.split_at_mut(b);
-            let (Some(ra), Some(rb)) = (left[a].boundary.reach, right[0].boundary.reach) else {
-                continue;
+            let (one, other) = (&mut *left[a], &mut *right[0]);
+            let region = if listed {
+                let met = |body: &SoftBodyState, partner: usize| {
+                    !body.boundary.candidates.against(partner as u32).is_empty()
+                };
+                if !met(one, b) && !met(other, a) {
+                    continue;
+                }
+                None
+            } else {
+                let (Some(ra), Some(rb)) = (one.boundary.reach, other.boundary.reach) else {
+                    continue;
+                };
+                if !ra.intersects(&rb) {
+                    continue;
+                }
+                Some(Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)))
             };
-            if ra.intersects(&rb) {
-                contacts += resolve_pair(
-                    &mut left[a],
-                    &mut right[0],
-                    phase,
-                    &ra,
-                    &rb,
-                    [a as u32, b as u32],
-                );
-            }
+            contacts += resolve_pair(one, other, phase, region, [a as u32, b as u32]);
         }
     }
     contacts
 }
 
-/// Prepares `body` for a pass of `phase` (its triangle grid); returns its bounds, if it takes
-/// part. The plugin calls this on every body, then [`resolve_pair`] on the overlapping pairs
-/// and [`resolve_self`] on each body.
-fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) -> Option<Aabb> {
+/// Prepares `body` for a pass of `phase` (its triangle grid, but for a substep's pass, which
+/// reads the step's candidates). The pass then resolves the overlapping pairs and each body
+/// with itself.
+fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) {
     if phase != SoftContactPhase::Final {
         body.scratch.soft_supports.clear();
     }
@@ -202,19 +175,40 @@ fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) -> Optio
                 body.contacts.sphere[i as usize] = u32::MAX;
             }
         }
+        return;
     }
     let margin = body.soft_contacts.map_or(0.0, |s| s.thickness);
-    prepare_soft_contacts(body, phase.ahead(), margin)
+    prepare_soft_contacts(body, phase.ahead(), margin);
+}
+
+/// Which particles of one body a pass looks at, and where it finds the triangles of the other
+/// body near each.
+enum Near<'a> {
+    /// The particles of `particles` whose motion reaches into `region`, against the triangles
+    /// `grid` lists near that motion; for a self contact, `rest` holds the rest positions,
+    /// and the triangles within two longest boundary edges of the particle at rest are
+    /// skipped (its neighbours on the same surface).
+    Grid {
+        particles: &'a [u32],
+        grid: &'a TriangleGrid,
+        region: Aabb,
+        rest: Option<&'a [Vec3]>,
+    },
+    /// The step's candidates against the other body.
+    Listed {
+        candidates: &'a SoftCandidates,
+        list: &'a [CandidateParticle],
+    },
 }
 
 /// Contacts between two different bodies (both ways: `a`'s particles against `b`'s triangles,
-/// then `b`'s against `a`'s), whose prepared bounds are `ra` and `rb`.
+/// then `b`'s against `a`'s), found in the overlap `region` of their prepared bounds, or from
+/// the step's candidates (`None`).
 fn resolve_pair(
     a: &mut SoftBodyState,
     b: &mut SoftBodyState,
     phase: SoftContactPhase,
-    ra: &Aabb,
-    rb: &Aabb,
+    region: Option<Aabb>,
     slots: [u32; 2],
 ) -> u32 {
     let (Some(sa), Some(sb)) = (a.soft_contacts, b.soft_contacts) else {
@@ -226,7 +220,6 @@ fn resolve_pair(
         return 0;
     }
     let thickness = sa.thickness.max(sb.thickness);
-    let overlap = Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)).loosened(thickness);
     let mu = combined_friction(a.material.friction, b.material.friction);
     let pa = Arrays::new(
         &mut a.positions,
@@ -262,17 +255,23 @@ fn resolve_pair(
         partner: slots[0],
         supports: std::mem::take(&mut b.scratch.soft_supports).into(),
     };
-    let contacts =
-        contact_a.particles_against_triangles(&ba.particles, &pa, bb, &pb, None, &overlap, ta)
-            + contact_b.particles_against_triangles(
-                &bb.particles,
-                &pb,
-                ba,
-                &pa,
-                None,
-                &overlap,
-                tb,
-            );
+    // `a`'s particles (listed in `a`'s candidates, or all of `a`'s in the region) against
+    // `b`'s triangles (hashed in `b`'s grid), then the other way.
+    let contacts = contact_a.particles_against_triangles(
+        &pa,
+        &bb.triangles,
+        &pb,
+        near_of(ba, bb, region, thickness, slots[1]),
+        bb.longest_edge,
+        ta,
+    ) + contact_b.particles_against_triangles(
+        &pb,
+        &ba.triangles,
+        &pa,
+        near_of(bb, ba, region, thickness, slots[0]),
+        ba.longest_edge,
+        tb,
+    );
     a.scratch.soft_supports = contact_a.supports.into_inner();
     b.scratch.soft_supports = contact_b.supports.into_inner();
     record_soft_contacts(a);
@@ -286,6 +285,30 @@ fn resolve_pair(
         }
     }
     contacts
+}
+
+/// How a pair's pass finds `from`'s particles near `to`'s triangles (in slot `partner`): in
+/// `to`'s grid within the pair's overlap `region` grown by `thickness`, or, without a region,
+/// from `from`'s candidates.
+fn near_of<'a>(
+    from: &'a Boundary,
+    to: &'a Boundary,
+    region: Option<Aabb>,
+    thickness: f32,
+    partner: u32,
+) -> Near<'a> {
+    match region {
+        Some(region) => Near::Grid {
+            particles: &from.particles,
+            grid: &to.grid,
+            region: region.loosened(thickness),
+            rest: None,
+        },
+        None => Near::Listed {
+            candidates: &from.candidates,
+            list: from.candidates.against(partner),
+        },
+    }
 }
 
 /// Contacts of a body with itself, if it asks for them.
@@ -312,16 +335,27 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
         supports: std::mem::take(&mut body.scratch.soft_supports).into(),
     };
     let boundary = &body.boundary;
-    let rest = body.mesh.positions();
+    let near = if phase == SoftContactPhase::Substep {
+        Near::Listed {
+            candidates: &boundary.candidates,
+            list: boundary.candidates.against(slot),
+        }
+    } else {
+        Near::Grid {
+            particles: &boundary.particles,
+            grid: &boundary.grid,
+            region: reach.loosened(settings.thickness),
+            rest: Some(body.mesh.positions()),
+        }
+    };
     let touched = &mut body.scratch.soft_touched;
     touched.clear();
     let contacts = contact.particles_against_triangles(
-        &boundary.particles,
         &arrays,
-        boundary,
+        &boundary.triangles,
         &arrays,
-        Some(rest),
-        &reach,
+        near,
+        boundary.longest_edge,
         touched,
     );
     body.scratch.soft_supports = contact.supports.into_inner();
@@ -384,12 +418,11 @@ fn outside_of(x: Vec3, corners: [Vec3; 3], thickness: f32) -> bool {
     (x - a).dot((b - a).cross(c - a).normalize_or_zero()) > -thickness
 }
 
-/// The triangle of `triangles` (corners at `corner(j)`) that the grid lists near `swept` and
-/// is nearest `xp`, skipping those `skip` rejects.
+/// The triangle of `triangles` (corners at `corner(j)`) that `near` lists and is nearest
+/// `xp`, skipping those `skip` rejects.
 fn nearest_triangle(
     xp: Vec3,
-    swept: &Aabb,
-    grid: &TriangleGrid,
+    near: impl FnOnce(&mut dyn FnMut(u32)),
     triangles: &[[u32; 3]],
     corner: impl Fn(usize) -> Vec3,
     mut skip: impl FnMut([u32; 3]) -> bool,
@@ -405,7 +438,7 @@ fn nearest_triangle(
         offset.normalize_or_zero().dot(normal).abs()
     };
     let mut nearest: Option<([usize; 3], [Vec3; 3], Vec3, f32)> = None;
-    grid.for_each_near(swept, |k| {
+    near(&mut |k| {
         let tri = triangles[k as usize];
         if skip(tri) {
             return;
@@ -439,61 +472,67 @@ struct Contact {
 }
 
 impl Contact {
-    /// The narrow phase: each of `particles` (of `p`) inside `region` against the triangles of
-    /// `boundary` (of `t`) near it. For a self contact (`p` and `t` the same), `rest` holds the
-    /// rest positions, and the triangles within two longest boundary edges of the particle at
-    /// rest are skipped (its neighbours on the same surface).
-    #[allow(clippy::too_many_arguments)] // the two sides' arrays, and where to look
+    /// The narrow phase: the particles of `p` that `near` lists against the triangles
+    /// `triangles` (of `t`, whose longest boundary edge is `reach`) near each.
     fn particles_against_triangles(
         &self,
-        particles: &[u32],
         p: &Arrays,
-        boundary: &Boundary,
+        triangles: &[[u32; 3]],
         t: &Arrays,
-        rest: Option<&[Vec3]>,
-        region: &Aabb,
+        near: Near,
+        reach: f32,
         touched: &mut Vec<(u32, Vec3)>,
     ) -> u32 {
         let ahead = self.phase.ahead();
-        let thickness = self.thickness;
-        // A particle past a triangle by more than this is taken to be on its far side (the
-        // other face of a thin part), unless it was outside where the motion started.
-        let reach = boundary.longest_edge;
+        let corner = |j: usize| t.x.get(j) + ahead * t.v.get(j);
         let mut contacts = 0;
-        for &i in particles {
-            let i = i as usize;
-            let w_p = p.w[i];
-            let x = p.x.get(i);
-            let xp = x + ahead * p.v.get(i);
-            let swept = Aabb::new(x.min(xp), x.max(xp)).loosened(thickness);
-            if !swept.intersects(region) {
-                continue;
-            }
-            // The nearest triangle decides, as a signed distance would: a particle over the
-            // top face near its edge is outside the body, whatever the side face's plane says.
-            let self_skip = |tri: [u32; 3]| {
-                rest.is_some_and(|rest| {
-                    if tri.contains(&(i as u32)) {
-                        return true;
-                    }
-                    let [a, b, c] = tri.map(|j| rest[j as usize]);
-                    let q = closest_barycentric(rest[i], a, b, c);
-                    (a * q.x + b * q.y + c * q.z).distance(rest[i]) < 2.0 * reach
-                })
-            };
-            let nearest = nearest_triangle(
-                xp,
-                &swept,
-                &boundary.grid,
-                &boundary.triangles,
-                |j| t.x.get(j) + ahead * t.v.get(j),
-                self_skip,
-            );
-            if let Some(corners) = nearest
-                && let Some(n) = self.resolve(i, w_p, p, corners, t, reach)
+        // The nearest triangle decides, as a signed distance would: a particle over the top
+        // face near its edge is outside the body, whatever the side face's plane says.
+        let mut meet = |i: usize, corners: Option<[usize; 3]>| {
+            if let Some(corners) = corners
+                && let Some(n) = self.resolve(i, p.w[i], p, corners, t, reach)
             {
                 touched.push((i as u32, n));
                 contacts += 1;
+            }
+        };
+        match near {
+            Near::Listed { candidates, list } => {
+                for particle in list {
+                    let i = particle.particle as usize;
+                    let xp = p.x.get(i) + ahead * p.v.get(i);
+                    let listed = candidates.triangles_of(particle);
+                    let near = |visit: &mut dyn FnMut(u32)| listed.iter().for_each(|&k| visit(k));
+                    meet(i, nearest_triangle(xp, near, triangles, corner, |_| false));
+                }
+            }
+            Near::Grid {
+                particles,
+                grid,
+                region,
+                rest,
+            } => {
+                for &i in particles {
+                    let i = i as usize;
+                    let x = p.x.get(i);
+                    let xp = x + ahead * p.v.get(i);
+                    let swept = Aabb::new(x.min(xp), x.max(xp)).loosened(self.thickness);
+                    if !swept.intersects(&region) {
+                        continue;
+                    }
+                    let self_skip = |tri: [u32; 3]| {
+                        rest.is_some_and(|rest| {
+                            if tri.contains(&(i as u32)) {
+                                return true;
+                            }
+                            let [a, b, c] = tri.map(|j| rest[j as usize]);
+                            let q = closest_barycentric(rest[i], a, b, c);
+                            (a * q.x + b * q.y + c * q.z).distance(rest[i]) < 2.0 * reach
+                        })
+                    };
+                    let near = |visit: &mut dyn FnMut(u32)| grid.for_each_near(&swept, visit);
+                    meet(i, nearest_triangle(xp, near, triangles, corner, self_skip));
+                }
             }
         }
         contacts

@@ -12,6 +12,7 @@ use glam::Vec3;
 use super::body::SoftBodyState;
 use super::colliders::{ColliderInstance, RigidSphereState};
 use super::parallel::{Parallel, Serial, SharedSlice};
+use super::soft_broad_phase::{candidates_hold, gather_soft_candidates};
 use super::soft_contacts::{SoftContactPhase, soft_contact_pass};
 use super::substep::SubstepStage;
 use super::substep_plan::SubstepPlan;
@@ -118,8 +119,10 @@ fn for_each_lockstep(
 /// [`Stage::Substeps`](super::Stage::Substeps) for bodies that may touch each other (the plugin's groups of bodies
 /// whose bounds overlap): a soft-contact pass on the predicted positions `x + h v`, then the
 /// substeps in lockstep, as many as the most any body in substeps needs (the paper's springs
-/// run their one substep with the first). In each substep every body's shape solve runs, then
-/// one two-way soft-contact pass on the predicted positions (when a body is in substeps), then
+/// run their one substep with the first). The particles that may meet another body within the
+/// step are found once, after the first pass (`soft_broad_phase.rs`). In each substep every
+/// body's shape solve runs, then one two-way soft-contact pass on the predicted positions over
+/// those candidates (when a body is in substeps), then
 /// each body's other substep stages, then what the volume impulses pushed into other bodies is
 /// handed to them. The bodies run one per job of `parallel` (their blocks on one thread each)
 /// wherever they do not touch each other's data, and the contact passes in order, so the
@@ -157,6 +160,9 @@ pub(crate) fn substeps_together(
         let b = &mut *body;
         b.state.plan_substeps(h, b.spheres, colliders, most);
     }
+    if most.is_some() {
+        gather_soft_candidates(bodies, h);
+    }
     for k in 0..most.unwrap_or(1).max(1) {
         for_each_lockstep(bodies, parallel, &|body| {
             if let Some(plan) = body.plan_for(k) {
@@ -170,7 +176,12 @@ pub(crate) fn substeps_together(
                 );
             }
         });
-        if most.is_some() {
+        if let Some(n) = most {
+            // The step's candidates hold while every boundary particle stays within its
+            // radius; past it (a fast impact), they are found again for the rest of the step.
+            if !bodies.iter().all(|b| candidates_hold(b)) {
+                gather_soft_candidates(bodies, h * (n - k) as f32 / n as f32);
+            }
             counted_pass(bodies, SoftContactPhase::Substep);
         }
         for_each_lockstep(bodies, parallel, &|body| {
