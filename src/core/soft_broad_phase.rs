@@ -15,12 +15,14 @@
 //! its neighbours on the same surface, not a fold.
 
 use std::ops::DerefMut;
+use std::sync::atomic::{AtomicU32, Ordering};
 
 use glam::Vec3;
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::body::SoftBodyState;
 use super::boundary::closest_barycentric;
+use super::parallel::{Parallel, SharedSlice};
 
 /// How far a step's candidates reach past the straight paths, in the body's longest boundary
 /// edges (on top of the contact gap).
@@ -79,32 +81,57 @@ pub(crate) fn prepare_soft_contacts(
 /// it lies within the particle's radius, the largest of its corners' and the pair's contact gap
 /// of it: while every particle stays within its radius of where it was
 /// ([`candidates_hold`]), no triangle left out can come within the gap of it.
-pub(crate) fn gather_soft_candidates<B: DerefMut<Target = SoftBodyState>>(
+pub(crate) fn gather_soft_candidates<B: DerefMut<Target = SoftBodyState> + Send>(
     bodies: &mut [B],
     h: f32,
+    rounds: &mut PairRounds,
+    parallel: &dyn Parallel,
 ) {
-    for body in bodies.iter_mut() {
-        start_paths(body, h);
-    }
+    for_each_body(bodies, parallel, &|body| start_paths(body, h));
+    rounds.clear(bodies.len());
     for a in 0..bodies.len() {
-        gather_self(&mut bodies[a], a as u32);
+        if bodies[a].soft_contacts.is_some_and(|s| s.self_contacts) {
+            rounds.push(a, a);
+        }
         for b in a + 1..bodies.len() {
-            let (left, right) = bodies.split_at_mut(b);
-            let (one, other) = (&mut *left[a], &mut *right[0]);
+            let (one, other) = (&*bodies[a], &*bodies[b]);
             let (Some(ra), Some(rb)) = (one.boundary.reach, other.boundary.reach) else {
                 continue;
             };
-            if !ra.intersects(&rb)
-                || (one.is_sleeping() && other.is_sleeping())
-                || !one.collision_filter.interacts_with(other.collision_filter)
+            if ra.intersects(&rb)
+                && !(one.is_sleeping() && other.is_sleeping())
+                && one.collision_filter.interacts_with(other.collision_filter)
             {
-                continue;
+                rounds.push(a, b);
             }
-            let overlap = Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs));
-            gather_pair(one, other, &overlap, b as u32);
-            gather_pair(other, one, &overlap, a as u32);
         }
     }
+    rounds.run(bodies, parallel, &|one, other, [a, b]| {
+        match other {
+            None => gather_self(one, a),
+            Some(other) => {
+                let (Some(ra), Some(rb)) = (one.boundary.reach, other.boundary.reach) else {
+                    return 0;
+                };
+                let overlap = Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs));
+                gather_pair(one, other, &overlap, b);
+                gather_pair(other, one, &overlap, a);
+            }
+        }
+        0
+    });
+}
+
+/// Runs `job` on every body of `bodies`, one body per job of `parallel`.
+pub(crate) fn for_each_body<B: DerefMut<Target = SoftBodyState> + Send>(
+    bodies: &mut [B],
+    parallel: &dyn Parallel,
+    job: &(dyn Fn(&mut SoftBodyState) + Sync),
+) {
+    let count = bodies.len();
+    // SAFETY: each job reaches its own body alone.
+    let shared = unsafe { SharedSlice::new(bodies) };
+    parallel.run(count, &|i| job(unsafe { shared.get_mut(i) }));
 }
 
 /// Whether `body`'s candidates still hold: every boundary particle within its radius of where
@@ -247,6 +274,91 @@ fn gather_self(body: &mut SoftBodyState, slot: u32) {
     }
 }
 
+/// What a pass does with a pair: `job(one, other, [a, b])`, `other` `None` for a body with
+/// itself; returns the contacts it made.
+pub(crate) type PairJob<'a> =
+    dyn Fn(&mut SoftBodyState, Option<&mut SoftBodyState>, [u32; 2]) -> u32 + Sync + 'a;
+
+/// The pairs a soft-contact pass resolves (a body with itself as `[a, a]`), pushed in the
+/// order a pass on one thread takes them and sorted into rounds of pairs that share no body:
+/// each pair goes in the round after the last one holding either of its bodies, so that every
+/// body meets its partners in the pushed order, and the pairs of a round run at the same time
+/// with the same result as one after another. Kept between passes so that they allocate
+/// nothing once grown.
+#[derive(Debug, Default)]
+pub(crate) struct PairRounds {
+    /// Per body: the round after the last one holding it so far.
+    next: Vec<u32>,
+    /// Each pair with its round, in the order pushed.
+    listed: Vec<(u32, [u32; 2])>,
+    /// The pairs by round, and where each round starts in them (and their end).
+    pairs: Vec<[u32; 2]>,
+    starts: Vec<u32>,
+    /// Scratch: the next free place in each round while sorting.
+    fill: Vec<u32>,
+}
+
+impl PairRounds {
+    /// Forgets the pairs, for a pass over `bodies` bodies.
+    pub(crate) fn clear(&mut self, bodies: usize) {
+        self.next.clear();
+        self.next.resize(bodies, 0);
+        self.listed.clear();
+    }
+
+    /// Adds the pair `a`, `b` (`a == b` for a body with itself).
+    pub(crate) fn push(&mut self, a: usize, b: usize) {
+        let round = self.next[a].max(self.next[b]);
+        self.listed.push((round, [a as u32, b as u32]));
+        self.next[a] = round + 1;
+        self.next[b] = round + 1;
+    }
+
+    /// Runs `job` on every pair pushed, round after round, a round's pairs as jobs of
+    /// `parallel`: `job(one, other, [a, b])` with `other` `None` for a body with itself.
+    /// Returns the sum of what the jobs return.
+    pub(crate) fn run<B: DerefMut<Target = SoftBodyState> + Send>(
+        &mut self,
+        bodies: &mut [B],
+        parallel: &dyn Parallel,
+        job: &PairJob<'_>,
+    ) -> u32 {
+        let rounds = self.next.iter().copied().max().unwrap_or(0) as usize;
+        self.starts.clear();
+        self.starts.resize(rounds + 1, 0);
+        for &(round, _) in &self.listed {
+            self.starts[round as usize + 1] += 1;
+        }
+        for r in 1..self.starts.len() {
+            self.starts[r] += self.starts[r - 1];
+        }
+        self.pairs.clear();
+        self.pairs.resize(self.listed.len(), [0; 2]);
+        self.fill.clear();
+        self.fill.extend_from_slice(&self.starts);
+        for &(round, pair) in &self.listed {
+            self.pairs[self.fill[round as usize] as usize] = pair;
+            self.fill[round as usize] += 1;
+        }
+        let found = AtomicU32::new(0);
+        // SAFETY: the pairs of a round share no body, so each job reaches its bodies alone.
+        let shared = unsafe { SharedSlice::new(bodies) };
+        let run_pair = |[a, b]: [u32; 2]| {
+            let one = unsafe { &mut **shared.get_mut(a as usize) };
+            let other = (a != b).then(|| unsafe { &mut **shared.get_mut(b as usize) });
+            found.fetch_add(job(one, other, [a, b]), Ordering::Relaxed);
+        };
+        for round in self.starts.windows(2) {
+            let pairs = &self.pairs[round[0] as usize..round[1] as usize];
+            match pairs {
+                [pair] => run_pair(*pair),
+                _ => parallel.run(pairs.len(), &|k| run_pair(pairs[k])),
+            }
+        }
+        found.into_inner()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -288,7 +400,12 @@ mod tests {
         }
         let h = 1.0 / 60.0;
         let mut refs: Vec<&mut SoftBodyState> = bodies.iter_mut().collect();
-        gather_soft_candidates(&mut refs, h);
+        gather_soft_candidates(
+            &mut refs,
+            h,
+            &mut PairRounds::default(),
+            &crate::core::Serial,
+        );
         let gap = gap(&bodies[0], &bodies[1]);
         for (b, body) in bodies.iter_mut().enumerate() {
             let paths = body.boundary.paths.clone();

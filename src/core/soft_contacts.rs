@@ -40,8 +40,9 @@ use super::colliders::combined_friction;
 use super::contacts::MAX_DEPENETRATION_SPEED;
 use super::impulses::SOFT_CONTACT;
 use super::lanes::Point4;
+use super::parallel::Parallel;
 use super::parallel::SharedSlice;
-use super::soft_broad_phase::{boundary_bounds, prepare_soft_contacts};
+use super::soft_broad_phase::{PairRounds, boundary_bounds, for_each_body, prepare_soft_contacts};
 use super::soft_records::{SoftAnchor, SoftSupport};
 
 /// Which of a step's two soft-contact passes runs (see the module's documentation).
@@ -118,44 +119,53 @@ impl<'a> Arrays<'a> {
 }
 
 /// One pass of soft contacts among `bodies` (every pair whose bounds overlap, and each body
-/// with itself where it asks for it), in the order of the slice. A substep's pass reads the
-/// step's candidates ([`gather_soft_candidates`](super::soft_broad_phase::gather_soft_candidates),
-/// which must have run this step); the others search a grid. Returns the contacts.
-pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState>>(
+/// with itself where it asks for it), each body meeting its partners in the order of the
+/// slice, pairs that share no body as jobs of `parallel` (`PairRounds`: the result does not
+/// depend on it). A substep's pass reads the step's candidates
+/// ([`gather_soft_candidates`](super::soft_broad_phase::gather_soft_candidates), which must
+/// have run this step); the others search a grid. Returns the contacts.
+pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
     bodies: &mut [B],
     phase: SoftContactPhase,
+    rounds: &mut PairRounds,
+    parallel: &dyn Parallel,
 ) -> u32 {
-    for body in bodies.iter_mut() {
-        prepare_soft_pass(body, phase);
-    }
+    for_each_body(bodies, parallel, &|body| prepare_soft_pass(body, phase));
     let listed = phase == SoftContactPhase::Substep;
-    let mut contacts = 0;
+    rounds.clear(bodies.len());
     for a in 0..bodies.len() {
-        contacts += resolve_self(&mut bodies[a], phase, a as u32);
+        if bodies[a].soft_contacts.is_some_and(|s| s.self_contacts) {
+            rounds.push(a, a);
+        }
         for b in a + 1..bodies.len() {
-            let (left, right) = bodies.split_at_mut(b);
-            let (one, other) = (&mut *left[a], &mut *right[0]);
-            let region = if listed {
+            let (one, other) = (&*bodies[a], &*bodies[b]);
+            let meet = if listed {
                 let met = |body: &SoftBodyState, partner: usize| {
                     !body.boundary.candidates.against(partner as u32).is_empty()
                 };
-                if !met(one, b) && !met(other, a) {
-                    continue;
-                }
-                None
+                met(one, b) || met(other, a)
             } else {
-                let (Some(ra), Some(rb)) = (one.boundary.reach, other.boundary.reach) else {
-                    continue;
-                };
-                if !ra.intersects(&rb) {
-                    continue;
-                }
-                Some(Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)))
+                overlap(one, other).is_some()
             };
-            contacts += resolve_pair(one, other, phase, region, [a as u32, b as u32]);
+            if meet {
+                rounds.push(a, b);
+            }
         }
     }
-    contacts
+    rounds.run(bodies, parallel, &|one, other, slots| match other {
+        None => resolve_self(one, phase, slots[0]),
+        Some(other) => {
+            let region = if listed { None } else { overlap(one, other) };
+            resolve_pair(one, other, phase, region, slots)
+        }
+    })
+}
+
+/// Where the prepared bounds of two bodies overlap, if they do.
+fn overlap(one: &SoftBodyState, other: &SoftBodyState) -> Option<Aabb> {
+    let (ra, rb) = (one.boundary.reach?, other.boundary.reach?);
+    ra.intersects(&rb)
+        .then(|| Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)))
 }
 
 /// Prepares `body` for a pass of `phase` (its triangle grid, but for a substep's pass, which

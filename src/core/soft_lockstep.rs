@@ -12,7 +12,7 @@ use glam::Vec3;
 use super::body::SoftBodyState;
 use super::colliders::{ColliderInstance, RigidSphereState};
 use super::parallel::{Parallel, Serial, SharedSlice};
-use super::soft_broad_phase::{candidates_hold, gather_soft_candidates};
+use super::soft_broad_phase::{PairRounds, candidates_hold, gather_soft_candidates};
 use super::soft_contacts::{SoftContactPhase, soft_contact_pass};
 use super::substep::SubstepStage;
 use super::substep_plan::SubstepPlan;
@@ -83,8 +83,13 @@ impl<'a> LockstepBody<'a> {
 }
 
 /// A soft-contact pass of `phase` among `bodies`, each body's contacts counted on it.
-fn counted_pass(bodies: &mut [LockstepBody], phase: SoftContactPhase) -> u32 {
-    let contacts = soft_contact_pass(bodies, phase);
+fn counted_pass(
+    bodies: &mut [LockstepBody],
+    phase: SoftContactPhase,
+    rounds: &mut PairRounds,
+    parallel: &dyn Parallel,
+) -> u32 {
+    let contacts = soft_contact_pass(bodies, phase, rounds, parallel);
     for body in bodies.iter_mut() {
         body.contacts += std::mem::take(&mut body.state.scratch.soft_count);
     }
@@ -135,7 +140,8 @@ pub(crate) fn substeps_together(
 ) -> u32 {
     let counted = |bodies: &[LockstepBody]| bodies.iter().map(|b| b.contacts).sum::<u32>();
     let before = counted(bodies);
-    counted_pass(bodies, SoftContactPhase::Predicted(h));
+    let rounds = &mut PairRounds::default();
+    counted_pass(bodies, SoftContactPhase::Predicted(h), rounds, parallel);
     // Bodies meeting each other meet at up to the spread of their mean velocities (the
     // diagonal of the box around them): an impact between two bodies is met a fraction of a
     // cell a substep, as a landing on a collider is.
@@ -161,7 +167,7 @@ pub(crate) fn substeps_together(
         b.state.plan_substeps(h, b.spheres, colliders, most);
     }
     if most.is_some() {
-        gather_soft_candidates(bodies, h);
+        gather_soft_candidates(bodies, h, rounds, parallel);
     }
     for k in 0..most.unwrap_or(1).max(1) {
         for_each_lockstep(bodies, parallel, &|body| {
@@ -180,9 +186,9 @@ pub(crate) fn substeps_together(
             // The step's candidates hold while every boundary particle stays within its
             // radius; past it (a fast impact), they are found again for the rest of the step.
             if !bodies.iter().all(|b| candidates_hold(b)) {
-                gather_soft_candidates(bodies, h * (n - k) as f32 / n as f32);
+                gather_soft_candidates(bodies, h * (n - k) as f32 / n as f32, rounds, parallel);
             }
-            counted_pass(bodies, SoftContactPhase::Substep);
+            counted_pass(bodies, SoftContactPhase::Substep, rounds, parallel);
         }
         for_each_lockstep(bodies, parallel, &|body| {
             if let Some(plan) = body.plan_for(k) {
@@ -207,8 +213,13 @@ pub(crate) fn substeps_together(
 /// [`Stage::Finish`](super::Stage::Finish)): on the positions the step ended at, moving penetrating particles apart
 /// and stopping their approach, so that no particle ends a step inside another body. Returns
 /// the contacts.
-pub(crate) fn final_contacts_together(bodies: &mut [LockstepBody]) -> u32 {
-    counted_pass(bodies, SoftContactPhase::Final)
+pub(crate) fn final_contacts_together(bodies: &mut [LockstepBody], parallel: &dyn Parallel) -> u32 {
+    counted_pass(
+        bodies,
+        SoftContactPhase::Final,
+        &mut PairRounds::default(),
+        parallel,
+    )
 }
 
 /// A whole step of several bodies that meet each other, in the plugin's order
@@ -235,7 +246,7 @@ pub fn step_bodies(
         body.state.apply_plasticity(h);
         body.state.finish_step(h, &[], colliders);
     }
-    contacts += final_contacts_together(&mut bodies);
+    contacts += final_contacts_together(&mut bodies, parallel);
     contacts
 }
 

@@ -170,7 +170,11 @@ pub(super) fn substeps_of_groups(
 }
 
 /// The final soft-contact pass of every group, at the step's finish.
-pub(super) fn final_pass_of_groups(bodies: &mut Bodies, groups: &SoftContactGroups) {
+pub(super) fn final_pass_of_groups(
+    bodies: &mut Bodies,
+    groups: &SoftContactGroups,
+    compute: &ComputePool,
+) {
     for group in groups.groups() {
         let mut members: Vec<(Mut<SoftBody>, Mut<SoftBodyStats>)> = Vec::with_capacity(group.len());
         for &entity in group {
@@ -186,7 +190,7 @@ pub(super) fn final_pass_of_groups(bodies: &mut Bodies, groups: &SoftContactGrou
                 LockstepBody::new(&mut body.state, &mut body.spheres)
             })
             .collect();
-        final_contacts_together(&mut lockstep);
+        final_contacts_together(&mut lockstep, compute);
         let counts: Vec<u32> = lockstep.iter().map(|b| b.contacts).collect();
         drop(lockstep);
         for ((_, stats), contacts) in members.iter_mut().zip(counts) {

@@ -335,7 +335,7 @@ pub(super) fn finish(mut p: StageParams, mut bodies: Bodies, groups: Res<SoftCon
             stats.steps += 1;
         },
     );
-    final_pass_of_groups(&mut bodies, &groups);
+    final_pass_of_groups(&mut bodies, &groups, &compute);
     spheres_after_bodies(Stage::Finish, h, &mut solver.states);
     p.clock.add_stage(start, Stage::Finish);
 }
