@@ -30,7 +30,7 @@ const STEP_SLACK: f32 = 0.1;
 
 /// The longest path a particle's candidates cover, in its body's longest boundary edges: a
 /// particle that moves further (in a fast impact) has them found again within the step.
-const MAX_PATH: f32 = 1.0;
+const MAX_PATH: f32 = 0.25;
 
 /// The bounds of where `body`'s boundary particles are now and `ahead` seconds on.
 pub(crate) fn boundary_bounds(body: &SoftBodyState, ahead: f32) -> Option<Aabb> {
@@ -76,8 +76,8 @@ pub(crate) fn prepare_soft_contacts(
 /// meet, into each body's [`SoftCandidates`], listed by the partner's slot in `bodies`. Two
 /// sleeping bodies, and bodies whose filters keep them apart, get no list.
 ///
-/// Each boundary particle gets a radius: how far it moves in `h` at its velocity, and
-/// [`STEP_SLACK`] of its body's longest boundary edge. A triangle is listed for a particle if
+/// Each boundary particle gets a radius: how far it moves in `h` at its velocity (at most
+/// [`MAX_PATH`] boundary edges), and [`STEP_SLACK`] of its body's longest boundary edge. A triangle is listed for a particle if
 /// it lies within the particle's radius, the largest of its corners' and the pair's contact gap
 /// of it: while every particle stays within its radius of where it was
 /// ([`candidates_hold`]), no triangle left out can come within the gap of it.

@@ -52,10 +52,10 @@ pub(crate) enum SoftContactPhase {
     Predicted(f32),
     /// After integration: on `x`, moving particles apart and stopping their approach.
     Final,
-    /// Inside a substep, on the positions the shape solve predicted (before they become
-    /// velocities): moving particles apart, with friction on their relative motion since the
-    /// substep's start, as XPBD meets contacts.
-    Substep,
+    /// Inside a substep of the given length, on the positions the shape solve predicted
+    /// (before they become velocities): moving particles apart, with friction on their
+    /// relative motion since the substep's start, as XPBD meets contacts.
+    Substep(f32),
 }
 
 impl SoftContactPhase {
@@ -63,7 +63,7 @@ impl SoftContactPhase {
     fn ahead(self) -> f32 {
         match self {
             SoftContactPhase::Predicted(h) => h,
-            SoftContactPhase::Final | SoftContactPhase::Substep => 0.0,
+            SoftContactPhase::Final | SoftContactPhase::Substep(_) => 0.0,
         }
     }
 }
@@ -131,7 +131,7 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
     parallel: &dyn Parallel,
 ) -> u32 {
     for_each_body(bodies, parallel, &|body| prepare_soft_pass(body, phase));
-    let listed = phase == SoftContactPhase::Substep;
+    let listed = matches!(phase, SoftContactPhase::Substep(_));
     rounds.clear(bodies.len());
     for a in 0..bodies.len() {
         if bodies[a].soft_contacts.is_some_and(|s| s.self_contacts) {
@@ -175,7 +175,7 @@ fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) {
     if phase != SoftContactPhase::Final {
         body.scratch.soft_supports.clear();
     }
-    if phase == SoftContactPhase::Substep {
+    if let SoftContactPhase::Substep(_) = phase {
         body.scratch.soft_pass += 1;
         // Only this substep's soft contacts constrain its volume impulses (an earlier one
         // keeps its normal, so that the particle stays listed once, but constrains nothing).
@@ -345,7 +345,7 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
         supports: std::mem::take(&mut body.scratch.soft_supports).into(),
     };
     let boundary = &body.boundary;
-    let near = if phase == SoftContactPhase::Substep {
+    let near = if let SoftContactPhase::Substep(_) = phase {
         Near::Listed {
             candidates: &boundary.candidates,
             list: boundary.candidates.against(slot),
@@ -582,17 +582,28 @@ impl Contact {
         if d >= 0.0 {
             return None;
         }
+        let mut depth = -d;
+        if let SoftContactPhase::Substep(hs) = self.phase {
+            // A particle that started the substep deeper than the gap inside the other body
+            // (bodies placed overlapping) is eased out at a bounded speed, as the predicted
+            // pass does, not shot out at its depth over the substep; what the substep's
+            // impulses left within the gap is undone whole.
+            let start = corners.map(|j| t.start[j].vec3());
+            let existing =
+                surface_distance(p.start[i].vec3(), start).map_or(0.0, |(d0, ..)| -d0 - thickness);
+            depth = bounded_correction(depth, existing, hs);
+        }
         let touch = Touch {
             i,
             w_p,
             corners,
             q,
             n,
-            depth: -d,
+            depth,
             w,
             w_t,
         };
-        if self.phase == SoftContactPhase::Substep {
+        if let SoftContactPhase::Substep(_) = self.phase {
             self.substep_contact(&touch, p, t);
         } else {
             self.velocity_contact(&touch, p, t, x, now);
@@ -714,7 +725,7 @@ impl Contact {
                 push(n * lambda);
                 lambda
             }
-            SoftContactPhase::Substep => unreachable!("handled above"),
+            SoftContactPhase::Substep(_) => unreachable!("handled above"),
             SoftContactPhase::Final => {
                 let shift = depth / w;
                 p.x.set(i, p.x.get(i) + n * (shift * w_p));
