@@ -15,14 +15,14 @@
 //! its neighbours on the same surface, not a fold.
 
 use std::ops::DerefMut;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 
 use glam::Vec3;
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::body::SoftBodyState;
 use super::boundary::closest_barycentric;
-use super::parallel::{Parallel, SharedSlice};
+use super::parallel::{Parallel, SharedSlice, wait_for};
 
 /// How far a step's candidates reach past the straight paths, in the body's longest boundary
 /// edges (on top of the contact gap).
@@ -279,16 +279,19 @@ fn gather_self(body: &mut SoftBodyState, slot: u32) {
 pub(crate) type PairJob<'a> =
     dyn Fn(&mut SoftBodyState, Option<&mut SoftBodyState>, [u32; 2]) -> u32 + Sync + 'a;
 
-/// The pairs a soft-contact pass resolves (a body with itself as `[a, a]`), pushed in the
-/// order a pass on one thread takes them and sorted into rounds of pairs that share no body:
-/// each pair goes in the round after the last one holding either of its bodies, so that every
-/// body meets its partners in the pushed order, and the pairs of a round run at the same time
-/// with the same result as one after another. Kept between passes so that they allocate
-/// nothing once grown.
+/// The pairs a soft-contact pass resolves (a body with itself as `[a, a]`), sorted into
+/// rounds of pairs that share no body: each pair, in the order pushed, goes in the first round
+/// that holds neither of its bodies yet (a greedy edge colouring), so that a round's pairs run
+/// at the same time, and the rounds, hence the result, do not depend on the thread count.
+/// Kept between passes so that they allocate nothing once grown.
 #[derive(Debug, Default)]
 pub(crate) struct PairRounds {
-    /// Per body: the round after the last one holding it so far.
+    /// Per body: the first 64 rounds that hold it, as bits.
+    used: Vec<u64>,
+    /// Per body: the round after the last one holding it so far (past the first 64).
     next: Vec<u32>,
+    /// How many rounds there are.
+    rounds: u32,
     /// Each pair with its round, in the order pushed.
     listed: Vec<(u32, [u32; 2])>,
     /// The pairs by round, and where each round starts in them (and their end).
@@ -296,34 +299,50 @@ pub(crate) struct PairRounds {
     starts: Vec<u32>,
     /// Scratch: the next free place in each round while sorting.
     fill: Vec<u32>,
+    /// Per pair (by round): the last earlier pairs holding its bodies (`u32::MAX`: none),
+    /// and whether it is done; per body, its last pair so far.
+    after: Vec<[u32; 2]>,
+    done: Vec<AtomicBool>,
+    last: Vec<u32>,
 }
 
 impl PairRounds {
     /// Forgets the pairs, for a pass over `bodies` bodies.
     pub(crate) fn clear(&mut self, bodies: usize) {
+        self.used.clear();
+        self.used.resize(bodies, 0);
         self.next.clear();
         self.next.resize(bodies, 0);
         self.listed.clear();
+        self.rounds = 0;
     }
 
     /// Adds the pair `a`, `b` (`a == b` for a body with itself).
     pub(crate) fn push(&mut self, a: usize, b: usize) {
-        let round = self.next[a].max(self.next[b]);
+        let free = (self.used[a] | self.used[b]).trailing_ones();
+        let round = if free < 64 {
+            self.used[a] |= 1 << free;
+            self.used[b] |= 1 << free;
+            free
+        } else {
+            self.next[a].max(self.next[b]).max(64)
+        };
+        self.next[a] = self.next[a].max(round + 1);
+        self.next[b] = self.next[b].max(round + 1);
         self.listed.push((round, [a as u32, b as u32]));
-        self.next[a] = round + 1;
-        self.next[b] = round + 1;
+        self.rounds = self.rounds.max(round + 1);
     }
 
-    /// Runs `job` on every pair pushed, round after round, a round's pairs as jobs of
-    /// `parallel`: `job(one, other, [a, b])` with `other` `None` for a body with itself.
-    /// Returns the sum of what the jobs return.
+    /// Runs `job` on every pair pushed, round after round, on the threads of `parallel`, a
+    /// pair as soon as the earlier pairs holding its bodies are done: `job(one, other, [a, b])`
+    /// with `other` `None` for a body with itself. Returns the sum of what the jobs return.
     pub(crate) fn run<B: DerefMut<Target = SoftBodyState> + Send>(
         &mut self,
         bodies: &mut [B],
         parallel: &dyn Parallel,
         job: &PairJob<'_>,
     ) -> u32 {
-        let rounds = self.next.iter().copied().max().unwrap_or(0) as usize;
+        let rounds = self.rounds as usize;
         self.starts.clear();
         self.starts.resize(rounds + 1, 0);
         for &(round, _) in &self.listed {
@@ -340,21 +359,49 @@ impl PairRounds {
             self.pairs[self.fill[round as usize] as usize] = pair;
             self.fill[round as usize] += 1;
         }
-        let found = AtomicU32::new(0);
-        // SAFETY: the pairs of a round share no body, so each job reaches its bodies alone.
-        let shared = unsafe { SharedSlice::new(bodies) };
-        let run_pair = |[a, b]: [u32; 2]| {
-            let one = unsafe { &mut **shared.get_mut(a as usize) };
-            let other = (a != b).then(|| unsafe { &mut **shared.get_mut(b as usize) });
-            found.fetch_add(job(one, other, [a, b]), Ordering::Relaxed);
-        };
-        for round in self.starts.windows(2) {
-            let pairs = &self.pairs[round[0] as usize..round[1] as usize];
-            match pairs {
-                [pair] => run_pair(*pair),
-                _ => parallel.run(pairs.len(), &|k| run_pair(pairs[k])),
-            }
+        // Each pair waits for the last earlier pair holding either of its bodies.
+        let count = self.pairs.len();
+        self.last.clear();
+        self.last.resize(bodies.len(), u32::MAX);
+        self.after.clear();
+        for (k, &[a, b]) in self.pairs.iter().enumerate() {
+            self.after
+                .push([self.last[a as usize], self.last[b as usize]]);
+            self.last[a as usize] = k as u32;
+            self.last[b as usize] = k as u32;
         }
+        if self.done.len() < count {
+            self.done.resize_with(count, || AtomicBool::new(false));
+        }
+        for flag in &self.done[..count] {
+            flag.store(false, Ordering::Relaxed);
+        }
+        let (pairs, after, done) = (&self.pairs, &self.after, &self.done);
+        let (found, next) = (AtomicU32::new(0), AtomicUsize::new(0));
+        // SAFETY: a pair runs only once every earlier pair holding either of its bodies is
+        // done, so each job reaches its bodies alone.
+        let shared = unsafe { SharedSlice::new(bodies) };
+        // Threads take the pairs in order as they come free and only wait for pairs taken
+        // before (as `run_phases` does), so any number of threads, one included, finishes.
+        let worker = |_thread: usize| {
+            loop {
+                let k = next.fetch_add(1, Ordering::Relaxed);
+                if k >= count {
+                    return;
+                }
+                for &earlier in &after[k] {
+                    if earlier != u32::MAX {
+                        wait_for(&done[earlier as usize]);
+                    }
+                }
+                let [a, b] = pairs[k];
+                let one = unsafe { &mut **shared.get_mut(a as usize) };
+                let other = (a != b).then(|| unsafe { &mut **shared.get_mut(b as usize) });
+                found.fetch_add(job(one, other, [a, b]), Ordering::Relaxed);
+                done[k].store(true, Ordering::Release);
+            }
+        };
+        parallel.run(parallel.threads().clamp(1, count.max(1)), &worker);
         found.into_inner()
     }
 }

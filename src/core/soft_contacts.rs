@@ -119,9 +119,8 @@ impl<'a> Arrays<'a> {
 }
 
 /// One pass of soft contacts among `bodies` (every pair whose bounds overlap, and each body
-/// with itself where it asks for it), each body meeting its partners in the order of the
-/// slice, pairs that share no body as jobs of `parallel` (`PairRounds`: the result does not
-/// depend on it). A substep's pass reads the step's candidates
+/// with itself where it asks for it), pairs that share no body at the same time on the
+/// threads of `parallel` (`PairRounds`: the result does not depend on them). A substep's pass reads the step's candidates
 /// ([`gather_soft_candidates`](super::soft_broad_phase::gather_soft_candidates), which must
 /// have run this step); the others search a grid. Returns the contacts.
 pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
@@ -130,7 +129,11 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
     rounds: &mut PairRounds,
     parallel: &dyn Parallel,
 ) -> u32 {
-    for_each_body(bodies, parallel, &|body| prepare_soft_pass(body, phase));
+    // A substep's preparation is a few flags; the others hash each body's triangles.
+    match phase {
+        SoftContactPhase::Substep(_) => bodies.iter_mut().for_each(|b| prepare_soft_pass(b, phase)),
+        _ => for_each_body(bodies, parallel, &|body| prepare_soft_pass(body, phase)),
+    }
     let listed = matches!(phase, SoftContactPhase::Substep(_));
     rounds.clear(bodies.len());
     for a in 0..bodies.len() {
