@@ -54,6 +54,7 @@ pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
 pub use runaway::{Runaway, RunawayLimits};
 pub use sleep::SleepSettings;
+pub(crate) use soft_broad_phase::PairRounds;
 pub use soft_lockstep::step_bodies;
 pub(crate) use soft_lockstep::{LockstepBody, final_contacts_together, substeps_together};
 pub use substep::{Stage, SubstepStage};

@@ -131,16 +131,17 @@ fn for_each_lockstep(
 /// each body's other substep stages, then what the volume impulses pushed into other bodies is
 /// handed to them. The bodies run one per job of `parallel` (their blocks on one thread each)
 /// wherever they do not touch each other's data, and the contact passes in order, so the
-/// result does not depend on it. Returns the contacts.
+/// result does not depend on it. `rounds` is the passes' scratch, kept by the caller.
+/// Returns the contacts.
 pub(crate) fn substeps_together(
     bodies: &mut [LockstepBody],
     h: f32,
     colliders: &[ColliderInstance],
     parallel: &dyn Parallel,
+    rounds: &mut PairRounds,
 ) -> u32 {
     let counted = |bodies: &[LockstepBody]| bodies.iter().map(|b| b.contacts).sum::<u32>();
     let before = counted(bodies);
-    let rounds = &mut PairRounds::default();
     counted_pass(bodies, SoftContactPhase::Predicted(h), rounds, parallel);
     // Bodies meeting each other meet at up to the spread of their mean velocities (the
     // diagonal of the box around them): an impact between two bodies is met a fraction of a
@@ -217,14 +218,13 @@ pub(crate) fn substeps_together(
 /// The soft-contact pass that ends a step of bodies stepped together (the last part of
 /// [`Stage::Finish`](super::Stage::Finish)): on the positions the step ended at, moving penetrating particles apart
 /// and stopping their approach, so that no particle ends a step inside another body. Returns
-/// the contacts.
-pub(crate) fn final_contacts_together(bodies: &mut [LockstepBody], parallel: &dyn Parallel) -> u32 {
-    counted_pass(
-        bodies,
-        SoftContactPhase::Final,
-        &mut PairRounds::default(),
-        parallel,
-    )
+/// the contacts. `rounds` is the passes' scratch, kept by the caller.
+pub(crate) fn final_contacts_together(
+    bodies: &mut [LockstepBody],
+    parallel: &dyn Parallel,
+    rounds: &mut PairRounds,
+) -> u32 {
+    counted_pass(bodies, SoftContactPhase::Final, rounds, parallel)
 }
 
 /// A whole step of several bodies that meet each other, in the plugin's order
@@ -246,12 +246,13 @@ pub fn step_bodies(
         body.state.begin_step();
         body.state.apply_forces(h, gravity, &Serial);
     }
-    let mut contacts = substeps_together(&mut bodies, h, colliders, parallel);
+    let rounds = &mut PairRounds::default();
+    let mut contacts = substeps_together(&mut bodies, h, colliders, parallel, rounds);
     for body in bodies.iter_mut() {
         body.state.apply_plasticity(h);
         body.state.finish_step(h, &[], colliders);
     }
-    contacts += final_contacts_together(&mut bodies, parallel);
+    contacts += final_contacts_together(&mut bodies, parallel, rounds);
     contacts
 }
 

@@ -7,7 +7,7 @@
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::*;
-use crate::core::{LockstepBody, final_contacts_together, substeps_together};
+use crate::core::{LockstepBody, PairRounds, final_contacts_together, substeps_together};
 
 /// This step's groups of soft bodies stepped together, found in the substeps' stage and kept
 /// for the final pass. Scratch arrays are kept between steps.
@@ -21,11 +21,16 @@ pub(super) struct SoftContactGroups {
     candidates: Vec<(Entity, Aabb, CollisionFilter, bool)>,
     /// Union-find over the candidates.
     parent: Vec<usize>,
+    /// The soft-contact passes' pairs, kept so that a step allocates none.
+    rounds: PairRounds,
 }
 
 impl SoftContactGroups {
-    fn groups(&self) -> impl Iterator<Item = &[Entity]> {
-        self.starts.windows(2).map(|w| &self.members[w[0]..w[1]])
+    /// The groups, and the pairs' scratch.
+    fn groups(&mut self) -> (impl Iterator<Item = &[Entity]>, &mut PairRounds) {
+        let members = &self.members;
+        let groups = self.starts.windows(2).map(move |w| &members[w[0]..w[1]]);
+        (groups, &mut self.rounds)
     }
 }
 
@@ -119,14 +124,15 @@ pub(super) fn find_groups(
 /// after it (as `par_with_spheres` does for the bodies run alone).
 pub(super) fn substeps_of_groups(
     bodies: &mut Bodies,
-    groups: &SoftContactGroups,
+    groups: &mut SoftContactGroups,
     solver: &mut SolverSpheres,
     compute: &ComputePool,
     h: f32,
 ) {
     let before = solver.states.clone();
     let rigid_before = solver.rigid.clone();
-    for group in groups.groups() {
+    let (groups, rounds) = groups.groups();
+    for group in groups {
         let mut members: Vec<(Mut<SoftBody>, Mut<SoftBodyStats>)> = Vec::with_capacity(group.len());
         for &entity in group {
             // SAFETY: the entities of a group are distinct, and this function borrows the
@@ -149,7 +155,7 @@ pub(super) fn substeps_of_groups(
                 LockstepBody::new(&mut body.state, &mut body.spheres)
             })
             .collect();
-        substeps_together(&mut lockstep, h, &solver.colliders, compute);
+        substeps_together(&mut lockstep, h, &solver.colliders, compute, rounds);
         let counts: Vec<u32> = lockstep.iter().map(|b| b.contacts).collect();
         drop(lockstep);
         let share = start.elapsed() / group.len() as u32;
@@ -172,10 +178,11 @@ pub(super) fn substeps_of_groups(
 /// The final soft-contact pass of every group, at the step's finish.
 pub(super) fn final_pass_of_groups(
     bodies: &mut Bodies,
-    groups: &SoftContactGroups,
+    groups: &mut SoftContactGroups,
     compute: &ComputePool,
 ) {
-    for group in groups.groups() {
+    let (groups, rounds) = groups.groups();
+    for group in groups {
         let mut members: Vec<(Mut<SoftBody>, Mut<SoftBodyStats>)> = Vec::with_capacity(group.len());
         for &entity in group {
             // SAFETY: as in `substeps_of_groups`.
@@ -190,7 +197,7 @@ pub(super) fn final_pass_of_groups(
                 LockstepBody::new(&mut body.state, &mut body.spheres)
             })
             .collect();
-        final_contacts_together(&mut lockstep, compute);
+        final_contacts_together(&mut lockstep, compute, rounds);
         let counts: Vec<u32> = lockstep.iter().map(|b| b.contacts).collect();
         drop(lockstep);
         for ((_, stats), contacts) in members.iter_mut().zip(counts) {

@@ -279,7 +279,7 @@ pub(super) fn substeps(
     let compute = ComputePool::new(&p.threads);
     let few = few_bodies(&bodies, &compute);
     find_groups(&mut bodies, h, g, &mut groups);
-    substeps_of_groups(&mut bodies, &groups, solver, &compute, h);
+    substeps_of_groups(&mut bodies, &mut groups, solver, &compute, h);
     par_with_spheres(
         &mut bodies,
         solver,
@@ -318,7 +318,11 @@ pub(super) fn plasticity(mut p: StageParams, mut bodies: Bodies) {
 
 /// [`SoftBodySystems::Finish`]: the spheres meet the static colliders, each body's sleep and
 /// runaway check, the last soft-contact pass of the bodies stepped together, the spheres move.
-pub(super) fn finish(mut p: StageParams, mut bodies: Bodies, groups: Res<SoftContactGroups>) {
+pub(super) fn finish(
+    mut p: StageParams,
+    mut bodies: Bodies,
+    mut groups: ResMut<SoftContactGroups>,
+) {
     let Some(h) = p.step() else { return };
     let start = Instant::now();
     let g = p.gravity.0;
@@ -335,7 +339,7 @@ pub(super) fn finish(mut p: StageParams, mut bodies: Bodies, groups: Res<SoftCon
             stats.steps += 1;
         },
     );
-    final_pass_of_groups(&mut bodies, &groups, &compute);
+    final_pass_of_groups(&mut bodies, &mut groups, &compute);
     spheres_after_bodies(Stage::Finish, h, &mut solver.states);
     p.clock.add_stage(start, Stage::Finish);
 }
