@@ -6,11 +6,10 @@
 //!
 //! The grid has cells of about a triangle's size, and a particle looks only in the cells its
 //! motion covers, so the cost grows with the boundary particles in the overlap of two bodies'
-//! bounds, not with their product. A step's candidates are found on the straight paths
-//! `x + t v` (`0 <= t <= h`) of the particles and the triangles' corners, each grown by
-//! [`step_margin`]: the contact gap and a share of the longest boundary edge for what the
-//! substeps' shape solve, contacts and volume impulses add to the straight path. A contact
-//! a candidate list misses is still met by the step's final pass, which searches a grid.
+//! bounds, not with their product. A step's candidates are found within a radius of each
+//! boundary particle (its motion over the step and a share of the longest boundary edge for
+//! what the substeps add to it, [`gather_soft_candidates`]); while the particles stay within
+//! their radii they miss nothing, and a particle past its radius has them found again.
 //! Self contacts skip the triangles within two rest edges of the particle at rest: those are
 //! its neighbours on the same surface, not a fold.
 
@@ -95,10 +94,7 @@ pub(crate) fn gather_soft_candidates<B: DerefMut<Target = SoftBodyState> + Send>
         }
         for b in a + 1..bodies.len() {
             let (one, other) = (&*bodies[a], &*bodies[b]);
-            let (Some(ra), Some(rb)) = (one.boundary.reach, other.boundary.reach) else {
-                continue;
-            };
-            if ra.intersects(&rb)
+            if overlap(one, other).is_some()
                 && !(one.is_sleeping() && other.is_sleeping())
                 && one.collision_filter.interacts_with(other.collision_filter)
             {
@@ -110,16 +106,21 @@ pub(crate) fn gather_soft_candidates<B: DerefMut<Target = SoftBodyState> + Send>
         match other {
             None => gather_self(one, a),
             Some(other) => {
-                let (Some(ra), Some(rb)) = (one.boundary.reach, other.boundary.reach) else {
-                    return 0;
-                };
-                let overlap = Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs));
-                gather_pair(one, other, &overlap, b);
-                gather_pair(other, one, &overlap, a);
+                if let Some(region) = overlap(one, other) {
+                    gather_pair(one, other, &region, b);
+                    gather_pair(other, one, &region, a);
+                }
             }
         }
         0
     });
+}
+
+/// Where the prepared bounds (`Boundary::reach`) of two bodies overlap, if they do.
+pub(crate) fn overlap(one: &SoftBodyState, other: &SoftBodyState) -> Option<Aabb> {
+    let (ra, rb) = (one.boundary.reach?, other.boundary.reach?);
+    ra.intersects(&rb)
+        .then(|| Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)))
 }
 
 /// Runs `job` on every body of `bodies`, one body per job of `parallel`.
@@ -135,13 +136,14 @@ pub(crate) fn for_each_body<B: DerefMut<Target = SoftBodyState> + Send>(
 }
 
 /// Whether `body`'s candidates still hold: every boundary particle within its radius of where
-/// it was when they were found.
+/// it was when they were found (a body without soft contacts has none to hold).
 pub(crate) fn candidates_hold(body: &SoftBodyState) -> bool {
     let c = &body.boundary.paths;
-    body.boundary.particles.iter().all(|&i| {
-        let i = i as usize;
-        (body.positions[i] - c.start[i]).length_squared() <= c.radius[i] * c.radius[i]
-    })
+    body.soft_contacts.is_none()
+        || body.boundary.particles.iter().all(|&i| {
+            let i = i as usize;
+            (body.positions[i] - c.start[i]).length_squared() <= c.radius[i] * c.radius[i]
+        })
 }
 
 /// Forgets `body`'s candidates, gives its boundary particles their radii for `h` seconds

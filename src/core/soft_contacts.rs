@@ -42,7 +42,9 @@ use super::impulses::SOFT_CONTACT;
 use super::lanes::Point4;
 use super::parallel::Parallel;
 use super::parallel::SharedSlice;
-use super::soft_broad_phase::{PairRounds, boundary_bounds, for_each_body, prepare_soft_contacts};
+use super::soft_broad_phase::{
+    PairRounds, boundary_bounds, for_each_body, overlap, prepare_soft_contacts,
+};
 use super::soft_records::{SoftAnchor, SoftSupport};
 
 /// Which of a step's two soft-contact passes runs (see the module's documentation).
@@ -162,13 +164,6 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
             resolve_pair(one, other, phase, region, slots)
         }
     })
-}
-
-/// Where the prepared bounds of two bodies overlap, if they do.
-fn overlap(one: &SoftBodyState, other: &SoftBodyState) -> Option<Aabb> {
-    let (ra, rb) = (one.boundary.reach?, other.boundary.reach?);
-    ra.intersects(&rb)
-        .then(|| Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)))
 }
 
 /// Prepares `body` for a pass of `phase` (its triangle grid, but for a substep's pass, which
