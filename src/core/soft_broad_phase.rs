@@ -87,21 +87,11 @@ pub(crate) fn gather_soft_candidates<B: DerefMut<Target = SoftBodyState> + Send>
     parallel: &dyn Parallel,
 ) {
     for_each_body(bodies, parallel, &|body| start_paths(body, h));
-    rounds.clear(bodies.len());
-    for a in 0..bodies.len() {
-        if bodies[a].soft_contacts.is_some_and(|s| s.self_contacts) {
-            rounds.push(a, a);
-        }
-        for b in a + 1..bodies.len() {
-            let (one, other) = (&*bodies[a], &*bodies[b]);
-            if overlap(one, other).is_some()
-                && !(one.is_sleeping() && other.is_sleeping())
-                && one.collision_filter.interacts_with(other.collision_filter)
-            {
-                rounds.push(a, b);
-            }
-        }
-    }
+    rounds.plan(bodies, |one, other, _| {
+        overlap(one, other).is_some()
+            && !(one.is_sleeping() && other.is_sleeping())
+            && one.collision_filter.interacts_with(other.collision_filter)
+    });
     rounds.run(bodies, parallel, &|one, other, [a, b]| {
         match other {
             None => gather_self(one, a),
@@ -309,8 +299,28 @@ pub(crate) struct PairRounds {
 }
 
 impl PairRounds {
+    /// Plans a pass over `bodies`: each body that meets itself, and each pair `a < b` for
+    /// which `meet(a's body, b's body, [a, b])` holds.
+    pub(crate) fn plan<B: DerefMut<Target = SoftBodyState>>(
+        &mut self,
+        bodies: &[B],
+        meet: impl Fn(&SoftBodyState, &SoftBodyState, [usize; 2]) -> bool,
+    ) {
+        self.clear(bodies.len());
+        for a in 0..bodies.len() {
+            if bodies[a].soft_contacts.is_some_and(|s| s.self_contacts) {
+                self.push(a, a);
+            }
+            for b in a + 1..bodies.len() {
+                if meet(&bodies[a], &bodies[b], [a, b]) {
+                    self.push(a, b);
+                }
+            }
+        }
+    }
+
     /// Forgets the pairs, for a pass over `bodies` bodies.
-    pub(crate) fn clear(&mut self, bodies: usize) {
+    fn clear(&mut self, bodies: usize) {
         self.used.clear();
         self.used.resize(bodies, 0);
         self.next.clear();
@@ -320,7 +330,7 @@ impl PairRounds {
     }
 
     /// Adds the pair `a`, `b` (`a == b` for a body with itself).
-    pub(crate) fn push(&mut self, a: usize, b: usize) {
+    fn push(&mut self, a: usize, b: usize) {
         let free = (self.used[a] | self.used[b]).trailing_ones();
         let round = if free < 64 {
             self.used[a] |= 1 << free;

@@ -137,26 +137,16 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
         _ => for_each_body(bodies, parallel, &|body| prepare_soft_pass(body, phase)),
     }
     let listed = matches!(phase, SoftContactPhase::Substep(_));
-    rounds.clear(bodies.len());
-    for a in 0..bodies.len() {
-        if bodies[a].soft_contacts.is_some_and(|s| s.self_contacts) {
-            rounds.push(a, a);
-        }
-        for b in a + 1..bodies.len() {
-            let (one, other) = (&*bodies[a], &*bodies[b]);
-            let meet = if listed {
-                let met = |body: &SoftBodyState, partner: usize| {
-                    !body.boundary.candidates.against(partner as u32).is_empty()
-                };
-                met(one, b) || met(other, a)
-            } else {
-                overlap(one, other).is_some()
+    rounds.plan(bodies, |one, other, [a, b]| {
+        if listed {
+            let met = |body: &SoftBodyState, partner: usize| {
+                !body.boundary.candidates.against(partner as u32).is_empty()
             };
-            if meet {
-                rounds.push(a, b);
-            }
+            met(one, b) || met(other, a)
+        } else {
+            overlap(one, other).is_some()
         }
-    }
+    });
     rounds.run(bodies, parallel, &|one, other, slots| match other {
         None => resolve_self(one, phase, slots[0]),
         Some(other) => {
