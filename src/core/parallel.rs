@@ -117,6 +117,18 @@ impl SharedSlice<'_, Point4> {
     }
 }
 
+/// Runs `job` on every item of `items` (each a body), one item per job of `parallel`.
+pub(crate) fn for_each_mut<T: Send>(
+    items: &mut [T],
+    parallel: &dyn Parallel,
+    job: &(dyn Fn(&mut T) + Sync),
+) {
+    let count = items.len();
+    // SAFETY: each job reaches its own item alone.
+    let shared = unsafe { SharedSlice::new(items) };
+    parallel.run(count, &|i| job(unsafe { shared.get_mut(i) }));
+}
+
 /// One flag per block: whether its job in the running pass is done. A clone has its own flags
 /// (all clear), so clones of a body can step at the same time.
 #[derive(Debug, Default)]

@@ -21,7 +21,7 @@ use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::body::SoftBodyState;
 use super::boundary::closest_barycentric;
-use super::parallel::{Parallel, SharedSlice, wait_for};
+use super::parallel::{Parallel, SharedSlice, for_each_mut, wait_for};
 
 /// How far a step's candidates reach past the straight paths, in the body's longest boundary
 /// edges (on top of the contact gap).
@@ -86,7 +86,7 @@ pub(crate) fn gather_soft_candidates<B: DerefMut<Target = SoftBodyState> + Send>
     rounds: &mut PairRounds,
     parallel: &dyn Parallel,
 ) {
-    for_each_body(bodies, parallel, &|body| start_paths(body, h));
+    for_each_mut(bodies, parallel, &|body| start_paths(body, h));
     rounds.plan(bodies, |one, other, _| {
         overlap(one, other).is_some()
             && !(one.is_sleeping() && other.is_sleeping())
@@ -111,18 +111,6 @@ pub(crate) fn overlap(one: &SoftBodyState, other: &SoftBodyState) -> Option<Aabb
     let (ra, rb) = (one.boundary.reach?, other.boundary.reach?);
     ra.intersects(&rb)
         .then(|| Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)))
-}
-
-/// Runs `job` on every body of `bodies`, one body per job of `parallel`.
-pub(crate) fn for_each_body<B: DerefMut<Target = SoftBodyState> + Send>(
-    bodies: &mut [B],
-    parallel: &dyn Parallel,
-    job: &(dyn Fn(&mut SoftBodyState) + Sync),
-) {
-    let count = bodies.len();
-    // SAFETY: each job reaches its own body alone.
-    let shared = unsafe { SharedSlice::new(bodies) };
-    parallel.run(count, &|i| job(unsafe { shared.get_mut(i) }));
 }
 
 /// Whether `body`'s candidates still hold: every boundary particle within its radius of where

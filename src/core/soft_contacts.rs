@@ -40,11 +40,9 @@ use super::colliders::combined_friction;
 use super::contacts::MAX_DEPENETRATION_SPEED;
 use super::impulses::SOFT_CONTACT;
 use super::lanes::Point4;
-use super::parallel::Parallel;
 use super::parallel::SharedSlice;
-use super::soft_broad_phase::{
-    PairRounds, boundary_bounds, for_each_body, overlap, prepare_soft_contacts,
-};
+use super::parallel::{Parallel, for_each_mut};
+use super::soft_broad_phase::{PairRounds, boundary_bounds, overlap, prepare_soft_contacts};
 use super::soft_records::{SoftAnchor, SoftSupport};
 
 /// Which of a step's two soft-contact passes runs (see the module's documentation).
@@ -134,7 +132,7 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
     // A substep's preparation is a few flags; the others hash each body's triangles.
     match phase {
         SoftContactPhase::Substep(_) => bodies.iter_mut().for_each(|b| prepare_soft_pass(b, phase)),
-        _ => for_each_body(bodies, parallel, &|body| prepare_soft_pass(body, phase)),
+        _ => for_each_mut(bodies, parallel, &|body| prepare_soft_pass(body, phase)),
     }
     let listed = matches!(phase, SoftContactPhase::Substep(_));
     rounds.plan(bodies, |one, other, [a, b]| {

@@ -11,7 +11,7 @@ use glam::Vec3;
 
 use super::body::SoftBodyState;
 use super::colliders::{ColliderInstance, RigidSphereState};
-use super::parallel::{Parallel, Serial, SharedSlice};
+use super::parallel::{Parallel, Serial, for_each_mut};
 use super::soft_broad_phase::{PairRounds, candidates_hold, gather_soft_candidates};
 use super::soft_contacts::{SoftContactPhase, soft_contact_pass};
 use super::substep::SubstepStage;
@@ -109,18 +109,6 @@ impl DerefMut for LockstepBody<'_> {
     }
 }
 
-/// Runs `job` on every body of `bodies`, one body per job of `parallel`.
-fn for_each_lockstep(
-    bodies: &mut [LockstepBody],
-    parallel: &dyn Parallel,
-    job: &(dyn Fn(&mut LockstepBody) + Sync),
-) {
-    let count = bodies.len();
-    // SAFETY: each job reaches its own body alone.
-    let shared = unsafe { SharedSlice::new(bodies) };
-    parallel.run(count, &|i| job(unsafe { shared.get_mut(i) }));
-}
-
 /// [`Stage::Substeps`](super::Stage::Substeps) for bodies that may touch each other (the plugin's groups of bodies
 /// whose bounds overlap): a soft-contact pass on the predicted positions `x + h v`, then the
 /// substeps in lockstep, as many as the most any body in substeps needs (the paper's springs
@@ -171,7 +159,7 @@ pub(crate) fn substeps_together(
         gather_soft_candidates(bodies, h, rounds, parallel);
     }
     for k in 0..most.unwrap_or(1).max(1) {
-        for_each_lockstep(bodies, parallel, &|body| {
+        for_each_mut(bodies, parallel, &|body| {
             if let Some(plan) = body.plan_for(k) {
                 body.contacts += body.state.substep_stage(
                     SubstepStage::Shape,
@@ -196,7 +184,7 @@ pub(crate) fn substeps_together(
                 parallel,
             );
         }
-        for_each_lockstep(bodies, parallel, &|body| {
+        for_each_mut(bodies, parallel, &|body| {
             if let Some(plan) = body.plan_for(k) {
                 for stage in &SubstepStage::ORDER[1..] {
                     body.contacts += body.state.substep_stage(
