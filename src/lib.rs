@@ -50,8 +50,8 @@ pub mod surface;
 pub use components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
     SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity,
-    SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodyStats,
-    StaticCollider,
+    SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodySnapshot,
+    SoftBodyStats, StaticCollider,
 };
 #[cfg(feature = "render")]
 pub use loading::{
@@ -110,12 +110,12 @@ pub mod prelude {
     pub use crate::components::{
         DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
         SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity,
-        SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodyStats,
-        StaticCollider,
+        SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodySnapshot,
+        SoftBodyStats, StaticCollider,
     };
     pub use crate::core::{
-        ElasticSettings, Elasticity, ImpulseSettings, Plasticity, SoftBodyMaterial, TetMesh,
-        VolumeMethod,
+        ElasticSettings, Elasticity, ImpulseSettings, Plasticity, SnapshotError, SoftBodyMaterial,
+        TetMesh, VolumeMethod,
     };
     #[cfg(feature = "render")]
     pub use crate::loading::{

@@ -6,7 +6,9 @@ use std::time::Duration;
 use bevy::prelude::*;
 
 use super::SoftBodyStats;
-use crate::core::{MaterialError, SoftBodyMaterial, SoftBodyState, TetMesh};
+use crate::core::{
+    MaterialError, SnapshotError, SoftBodyMaterial, SoftBodyState, StateSnapshot, TetMesh,
+};
 
 /// A soft body. Spawn it with a [`Transform`] that places its tet mesh in the world (the mesh
 /// is given in its own local frame); on its first step the plugin moves the particles there.
@@ -118,4 +120,80 @@ impl SoftBody {
     pub fn rest_scale(&self) -> Vec3 {
         self.rest_scale
     }
+
+    /// The body's state now (see [`SoftBodySnapshot`]).
+    pub fn snapshot(&self) -> SoftBodySnapshot {
+        SoftBodySnapshot {
+            state: self.state.snapshot(),
+            placed: self.placed,
+            rest_scale: self.rest_scale,
+        }
+    }
+
+    /// Puts the body back in the state `snapshot` holds: this body or one spawned anew from the
+    /// same mesh (and, if it is not placed yet, with the same spawn scale or none). A snapshot
+    /// of another mesh, another version or a damaged one is an error and changes nothing.
+    pub fn restore(&mut self, snapshot: &SoftBodySnapshot) -> Result<(), SnapshotError> {
+        if self.placed || !snapshot.placed || snapshot.rest_scale == self.rest_scale {
+            self.state.restore(&snapshot.state)?;
+        } else {
+            // Spawned anew and not placed: its mesh is the one given, the snapshot's the one
+            // placement scaled (`plugin::prepare`).
+            let damaged = |e: String| SnapshotError::Damaged(format!("rest scale: {e}"));
+            let mesh = crate::plugin::scaled_mesh(self.state.mesh(), snapshot.rest_scale)
+                .map_err(|e| damaged(e.to_string()))?;
+            let mut state = SoftBodyState::new(mesh.into(), *self.state.material())?;
+            state.set_soft_contact_settings(self.state.soft_contact_settings());
+            state.set_sleep_settings(self.state.sleep_settings());
+            state.set_runaway_limits(self.state.runaway_limits());
+            state.set_collision_filter(self.state.collision_filter());
+            state.restore(&snapshot.state)?;
+            self.state = state;
+        }
+        if snapshot.placed && !self.placed {
+            self.state.time_substeps(true);
+        }
+        self.placed = snapshot.placed;
+        self.rest_scale = snapshot.rest_scale;
+        Ok(())
+    }
+}
+
+/// A [`SoftBody`] between two steps, to save and restore: its simulation state
+/// ([`StateSnapshot`]: particles, velocities, plasticity, friction, sleep, material) and its
+/// placement. Restoring it into a body of the same mesh and stepping gives bit for bit the
+/// steps the body would have taken (on any number of threads). The components a game puts
+/// beside a body (settings, [`PinnedParticles`](super::PinnedParticles),
+/// [`DrivenParticles`](super::DrivenParticles) with their captured offsets, the rigid
+/// spheres) are reflected and saved as a game saves its other components. With the feature
+/// `serialize` it is serde data.
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::{core::box_grid, prelude::*};
+///
+/// let mesh: std::sync::Arc<_> = box_grid(UVec3::splat(2), Vec3::splat(0.1), Vec3::ZERO)
+///     .unwrap()
+///     .into();
+/// let mut jelly = SoftBody::new(mesh.clone(), SoftBodyMaterial::JELLY).unwrap();
+/// jelly.velocities_mut()[0] = Vec3::X;
+/// let saved = jelly.snapshot();
+/// // Later, or in another app: a body of the same mesh takes the saved state.
+/// let mut again = SoftBody::new(mesh, SoftBodyMaterial::JELLY).unwrap();
+/// again.restore(&saved).unwrap();
+/// assert_eq!(again.state().velocities()[0], Vec3::X);
+/// // Another mesh is refused.
+/// let other = box_grid(UVec3::splat(3), Vec3::splat(0.1), Vec3::ZERO).unwrap();
+/// let mut other = SoftBody::new(other.into(), SoftBodyMaterial::JELLY).unwrap();
+/// assert!(matches!(other.restore(&saved), Err(SnapshotError::OtherMesh { .. })));
+/// ```
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
+pub struct SoftBodySnapshot {
+    /// The simulation state.
+    pub state: StateSnapshot,
+    /// Whether the body had been placed at its spawn transform.
+    pub placed: bool,
+    /// The spawn scale baked into its rest shape.
+    pub rest_scale: Vec3,
 }

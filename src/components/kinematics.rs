@@ -51,8 +51,8 @@ pub struct DrivenParticles {
     pub target: Entity,
     /// The particle indices.
     pub particles: Vec<u32>,
-    /// Offsets in the target's frame, captured on the first step.
-    #[reflect(ignore)]
+    /// Offsets in the target's frame, captured on the first step (reflected, so that a saved
+    /// game keeps them).
     pub(crate) offsets: Vec<Vec3>,
     /// Whether a missing target has been reported (once, until it is back).
     #[reflect(ignore)]

@@ -6,7 +6,7 @@ mod kinematics;
 pub(crate) mod settings;
 mod world;
 
-pub use body::SoftBody;
+pub use body::{SoftBody, SoftBodySnapshot};
 pub use diagnostics::{SoftBodyError, SoftBodyErrorKind, SoftBodyStats};
 pub use kinematics::{DrivenParticles, PinnedParticles};
 pub use settings::{

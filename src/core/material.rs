@@ -2,6 +2,7 @@
 
 /// How a body keeps its volume.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub enum VolumeMethod {
     /// The existing method the paper compares against (its section 3, Teschner et al. 2004):
     /// a penalty force per tet from `E_V = 1/2 k_V ((V - V0) / V0)^2`.
@@ -21,6 +22,7 @@ pub enum VolumeMethod {
 
 /// The settings of [`VolumeMethod::Xpbd`].
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct XpbdSettings {
     /// Substeps per step, each with one pass over every constraint and its own contacts.
     pub substeps: u32,
@@ -60,6 +62,7 @@ impl Default for VolumeMethod {
 
 /// The switches of the paper's method.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct ImpulseSettings {
     /// Restore the volume of each vertex's one-ring (section 5), once per step.
     pub one_ring: bool,
@@ -119,6 +122,7 @@ impl Default for ImpulseSettings {
 /// Plastic springs (paper section 6, last scene): a spring stretched or compressed past
 /// `yield_strain` creeps towards its current length, up to `max_strain` from the original one.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct Plasticity {
     /// Elastic strain `|e - e_p|` above which the spring starts to flow (`c_yield`).
     pub yield_strain: f32,
@@ -131,6 +135,7 @@ pub struct Plasticity {
 /// How stiff a body's edges are: what keeps its shape, while the [`VolumeMethod`] keeps its
 /// volume.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub enum Elasticity {
     /// The paper's springs: `E_D = 1/2 k_D ((L - D0) / D0)^2` on every edge, with a damper of
     /// `damping` (N s/m) along each, integrated explicitly (its scenes are reproduced with
@@ -165,6 +170,7 @@ pub enum Elasticity {
 /// solid of Young's modulus `E` and Poisson's ratio 1/4 (what a network of edges has), as XPBD
 /// constraints of compliance `1 / k_e`. [`VolumeMethod::Xpbd`] uses the same edges.
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct ElasticSettings {
     /// Young's modulus `E`, in pascals. Jelly 10-50 kPa, flesh 50-300 kPa, soft rubber about
     /// 1 MPa, hard rubber 10 MPa and more.
@@ -285,6 +291,7 @@ impl ElasticSettings {
 /// ));
 /// ```
 #[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct SoftBodyMaterial {
     /// Mass per unit volume, kg/m^3; each tet gives a quarter of its mass to each vertex.
     pub density: f32,

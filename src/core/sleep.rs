@@ -22,6 +22,7 @@ use glam::Vec3;
 use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::colliders::{ColliderInstance, RigidSphereState};
+use super::snapshot::SleepSnapshot;
 
 /// When a body falls asleep.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -56,10 +57,12 @@ pub(crate) struct Sleep {
     /// Whether the body is asleep.
     pub(crate) asleep: bool,
     /// While asleep: its bounds grown by the reach, the gravity it fell asleep in, and a
-    /// fingerprint of the colliders within the bounds.
+    /// fingerprint of the colliders within the bounds (`None` for a body restored asleep from
+    /// a snapshot: the colliders it meets at its first step are the ones it sleeps among, as
+    /// the fingerprint holds the shapes' addresses, which no save keeps).
     bounds: Option<Aabb>,
     gravity: Vec3,
-    colliders: u64,
+    colliders: Option<u64>,
 }
 
 impl Sleep {
@@ -132,7 +135,10 @@ impl Sleep {
         let disturbed = gravity != self.gravity
             || moved_kinematic
             || sphere_near
-            || colliders_near(&bounds, colliders) != self.colliders;
+            || *self
+                .colliders
+                .get_or_insert_with(|| colliders_near(&bounds, colliders))
+                != colliders_near(&bounds, colliders);
         if disturbed {
             self.wake();
             return false;
@@ -186,8 +192,38 @@ impl Sleep {
         self.asleep = true;
         self.bounds = Some(bounds);
         self.gravity = gravity;
-        self.colliders = colliders_near(&bounds, colliders);
+        self.colliders = Some(colliders_near(&bounds, colliders));
         true
+    }
+
+    /// What a snapshot keeps of it (`snapshot.rs`).
+    pub(crate) fn snapshot(&self) -> SleepSnapshot {
+        SleepSnapshot {
+            asleep: self.asleep,
+            quiet_for: self.quiet_for,
+            still_at: if self.quiet_for > 0.0 {
+                self.still_at.clone()
+            } else {
+                Vec::new()
+            },
+            bounds: self.bounds.map(|b| [b.mins, b.maxs]),
+            gravity: self.gravity,
+        }
+    }
+
+    /// Back to what `snapshot` kept; its settings stay. `snapshot` was checked to fit.
+    pub(crate) fn restore(&mut self, snapshot: &SleepSnapshot) {
+        self.asleep = snapshot.asleep;
+        self.quiet_for = snapshot.quiet_for;
+        if snapshot.still_at.is_empty() {
+            self.still_at.fill(Vec3::NAN);
+            self.quiet_for = 0.0;
+        } else {
+            self.still_at.copy_from_slice(&snapshot.still_at);
+        }
+        self.bounds = snapshot.bounds.map(|[lo, hi]| Aabb::new(lo, hi));
+        self.gravity = snapshot.gravity;
+        self.colliders = None;
     }
 }
 

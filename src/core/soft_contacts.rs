@@ -626,7 +626,10 @@ impl Contact {
         let slip = relative_motion - n * relative_motion.dot(n);
         let slip_length = slip.length();
         let anchor = p.anchors.get(i);
-        let anchored = anchor.partner == self.partner && anchor.pass + 1 >= p.pass;
+        // The corners are checked: an anchor may come from a restored snapshot.
+        let anchored = anchor.partner == self.partner
+            && anchor.pass.saturating_add(1) >= p.pass
+            && anchor.corners.iter().all(|&c| (c as usize) < t.w.len());
         let mut held_fully = false;
         if anchored {
             // Static friction: back on the anchor if it is within reach.

@@ -50,7 +50,8 @@ pub struct SoftReaction {
 
 /// Where a particle's static friction holds it on another body's surface: a point of one of
 /// its triangles, set in soft-contact pass `pass`.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct SoftAnchor {
     pub(crate) partner: u32,
     pub(crate) corners: [u32; 3],

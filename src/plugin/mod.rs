@@ -32,7 +32,7 @@ mod timing;
 use groups::*;
 pub use systems::SolverSpheres;
 use systems::*;
-pub(crate) use systems::{gather_spheres, report};
+pub(crate) use systems::{gather_spheres, report, scaled_mesh};
 #[cfg(test)]
 pub(crate) use threads::test_compute_pool;
 use threads::*;

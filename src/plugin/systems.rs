@@ -4,7 +4,7 @@
 use super::*;
 
 /// The body's rest mesh scaled by `scale`, or the error that makes that impossible.
-pub(super) fn scaled_mesh(
+pub(crate) fn scaled_mesh(
     mesh: &TetMesh,
     scale: Vec3,
 ) -> Result<TetMesh, crate::core::TetMeshError> {

@@ -1,0 +1,267 @@
+//! Save and restore: a [`StateSnapshot`] holds everything of a soft body that carries from one
+//! step to the next (particles, velocities, the plastic rest lengths, the friction anchors,
+//! sleep, the material), so that restoring it and stepping gives, bit for bit, the steps the
+//! body would have taken had it not been stopped: a save file, a rollback buffer, a replay.
+//!
+//! What is not in it, and why:
+//! - the tet mesh: a snapshot names its mesh by a [`MeshFingerprint`] and is restored into a
+//!   body made of the same mesh (a save file holds the level's assets apart, as a game's does);
+//! - the caches of the volume passes and the step's working memory (`StepScratch`,
+//!   `VolumePassScratch`): they decide how much work a step does, never what it computes;
+//! - what the game sets every step: kinematic particles, the rigid bodies it touches, and the
+//!   settings the plugin takes from components (sleep threshold, contacts, collision filter,
+//!   runaway limits), which a game saves with its components;
+//! - the last step's contacts (normals, which sphere): a step forgets them when it begins.
+//!
+//! With the feature `serialize` the snapshot is serde data in any format. It holds no NaN
+//! (unset values are `None`), so text formats (JSON, RON) can carry it. A snapshot of another
+//! mesh, of another version or whose arrays do not fit is a [`SnapshotError`], and the body is
+//! left as it was.
+
+use glam::Vec3;
+
+use super::body::SoftBodyState;
+use super::material::{MaterialError, SoftBodyMaterial};
+use super::soft_records::SoftAnchor;
+use super::tet_mesh::TetMesh;
+
+/// The version of [`StateSnapshot`]'s layout; a snapshot of another is refused.
+pub const SNAPSHOT_VERSION: u32 = 1;
+
+/// What a snapshot says of its body's tet mesh: its size and a hash of its tets and rest
+/// positions (FNV-1a over their bits: the same on every machine and Rust version, which the
+/// standard library's hasher does not promise).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
+pub struct MeshFingerprint {
+    /// Particles.
+    pub vertices: u32,
+    /// Tets.
+    pub tets: u32,
+    /// FNV-1a of the tets' indices and the rest positions' bits.
+    pub hash: u64,
+}
+
+impl MeshFingerprint {
+    /// The fingerprint of `mesh`.
+    pub fn of(mesh: &TetMesh) -> Self {
+        const PRIME: u64 = 0x0000_0100_0000_01b3;
+        let mut hash: u64 = 0xcbf2_9ce4_8422_2325;
+        let mut add = |word: u32| {
+            for byte in word.to_le_bytes() {
+                hash = (hash ^ byte as u64).wrapping_mul(PRIME);
+            }
+        };
+        for tet in mesh.tets() {
+            tet.iter().for_each(|&i| add(i));
+        }
+        for p in mesh.positions() {
+            p.to_array().iter().for_each(|c| add(c.to_bits()));
+        }
+        MeshFingerprint {
+            vertices: mesh.vertex_count() as u32,
+            tets: mesh.tets().len() as u32,
+            hash,
+        }
+    }
+}
+
+/// A soft body's state between two steps; see the module's documentation.
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
+pub struct StateSnapshot {
+    /// [`SNAPSHOT_VERSION`] when it was taken.
+    pub version: u32,
+    /// The mesh it was taken of.
+    pub mesh: MeshFingerprint,
+    material: SoftBodyMaterial,
+    positions: Vec<Vec3>,
+    previous_positions: Vec<Vec3>,
+    velocities: Vec<Vec3>,
+    motion_tracked: bool,
+    met_soft_bodies: bool,
+    sane_centre: Option<Vec3>,
+    /// Per edge: the rest length and plastic strain (plasticity's state).
+    spring_rest: Vec<f32>,
+    plastic_strain: Vec<f32>,
+    /// Per particle: where static friction holds it on a static collider.
+    friction_anchors: Vec<Option<Vec3>>,
+    /// Per particle: the last contact pass's depth and friction in a static collider.
+    static_contact: Vec<[f32; 2]>,
+    /// Per particle: where static friction holds it on another soft body.
+    soft_anchors: Vec<SoftAnchor>,
+    soft_pass: u32,
+    sleep: SleepSnapshot,
+}
+
+/// A body's sleep in a snapshot (`sleep.rs`); its settings are the game's.
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
+pub(crate) struct SleepSnapshot {
+    pub(crate) asleep: bool,
+    pub(crate) quiet_for: f32,
+    /// Where the particles stood when the quiet time began; empty while it has not begun.
+    pub(crate) still_at: Vec<Vec3>,
+    /// While asleep: its bounds (lowest and highest corner) and the gravity it fell asleep in.
+    pub(crate) bounds: Option<[Vec3; 2]>,
+    pub(crate) gravity: Vec3,
+}
+
+/// Why a snapshot could not be restored; the body is left as it was.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SnapshotError {
+    /// Taken by another version of the crate's layout.
+    #[error("snapshot version {found}, this build reads version {expected}")]
+    Version {
+        /// The snapshot's version.
+        found: u32,
+        /// [`SNAPSHOT_VERSION`].
+        expected: u32,
+    },
+    /// Taken of another tet mesh.
+    #[error(
+        "snapshot of another mesh ({} particles, {} tets, hash {:016x}); this body's has {} particles, {} tets, hash {:016x}",
+        found.vertices, found.tets, found.hash, expected.vertices, expected.tets, expected.hash
+    )]
+    OtherMesh {
+        /// The snapshot's mesh.
+        found: MeshFingerprint,
+        /// This body's.
+        expected: MeshFingerprint,
+    },
+    /// Its arrays or values do not fit the body (a damaged or hand-edited file).
+    #[error("snapshot damaged: {0}")]
+    Damaged(String),
+    /// Its material is not a valid material.
+    #[error("snapshot's material: {0}")]
+    Material(#[from] MaterialError),
+}
+
+impl StateSnapshot {
+    /// The particles' positions when it was taken.
+    pub fn positions(&self) -> &[Vec3] {
+        &self.positions
+    }
+
+    /// The particles' velocities when it was taken.
+    pub fn velocities(&self) -> &[Vec3] {
+        &self.velocities
+    }
+
+    /// Everything [`SoftBodyState::restore`] checks before it changes anything.
+    fn check(&self, body: &SoftBodyState) -> Result<(), SnapshotError> {
+        if self.version != SNAPSHOT_VERSION {
+            return Err(SnapshotError::Version {
+                found: self.version,
+                expected: SNAPSHOT_VERSION,
+            });
+        }
+        let expected = MeshFingerprint::of(&body.mesh);
+        if self.mesh != expected {
+            return Err(SnapshotError::OtherMesh {
+                found: self.mesh,
+                expected,
+            });
+        }
+        self.material.validate()?;
+        let damaged = |what: &str| Err(SnapshotError::Damaged(what.to_string()));
+        let (n, edges) = (body.positions.len(), body.springs.rest.len());
+        let per_particle = [
+            self.positions.len(),
+            self.previous_positions.len(),
+            self.velocities.len(),
+            self.friction_anchors.len(),
+            self.static_contact.len(),
+            self.soft_anchors.len(),
+        ];
+        if per_particle.iter().any(|&len| len != n) {
+            return damaged("a per-particle array has the wrong length");
+        }
+        if self.spring_rest.len() != edges || self.plastic_strain.len() != edges {
+            return damaged("a per-edge array has the wrong length");
+        }
+        let finite = |v: &[Vec3]| v.iter().all(|x| x.is_finite());
+        if !finite(&self.positions) || !finite(&self.previous_positions) {
+            return damaged("a position is not finite");
+        }
+        if !finite(&self.velocities) {
+            return damaged("a velocity is not finite");
+        }
+        if !self.spring_rest.iter().all(|l| l.is_finite() && *l >= 0.0) {
+            return damaged("a spring's rest length is not a length");
+        }
+        let anchor_fits =
+            |a: &SoftAnchor| a.partner == u32::MAX || a.corners.iter().all(|&c| c != u32::MAX);
+        if !self.soft_anchors.iter().all(anchor_fits) {
+            return damaged("a soft-contact anchor names no triangle");
+        }
+        let sleep = &self.sleep;
+        if !(sleep.still_at.is_empty() || sleep.still_at.len() == n) {
+            return damaged("the sleep's positions have the wrong length");
+        }
+        if sleep.asleep && sleep.bounds.is_none() {
+            return damaged("asleep without bounds");
+        }
+        Ok(())
+    }
+}
+
+impl SoftBodyState {
+    /// The body's state now, to restore later into this body or another made of the same mesh
+    /// (see `snapshot.rs`).
+    pub fn snapshot(&self) -> StateSnapshot {
+        StateSnapshot {
+            version: SNAPSHOT_VERSION,
+            mesh: MeshFingerprint::of(&self.mesh),
+            material: self.material,
+            positions: self.positions.clone(),
+            previous_positions: self.previous_positions.clone(),
+            velocities: self.velocities.clone(),
+            motion_tracked: self.motion_tracked,
+            met_soft_bodies: self.met_soft_bodies,
+            sane_centre: self.sane_centre,
+            spring_rest: self.springs.rest.clone(),
+            plastic_strain: self.springs.plastic_strain.clone(),
+            friction_anchors: (self.contacts.anchors.iter())
+                .map(|a| a.is_finite().then_some(*a))
+                .collect(),
+            static_contact: self.contacts.static_contact.clone(),
+            soft_anchors: self.scratch.soft_anchors.clone(),
+            soft_pass: self.scratch.soft_pass,
+            sleep: self.sleep.snapshot(),
+        }
+    }
+
+    /// Puts the body back in the state `snapshot` holds. The snapshot must be of this body's
+    /// mesh and of this build's [`SNAPSHOT_VERSION`]; anything that does not fit is an error
+    /// and leaves the body as it was. Settings the game gives (sleep threshold, contacts,
+    /// collision filter, runaway limits) stay this body's.
+    pub fn restore(&mut self, snapshot: &StateSnapshot) -> Result<(), SnapshotError> {
+        snapshot.check(self)?;
+        let s = snapshot;
+        self.set_material(s.material)?;
+        self.positions.copy_from_slice(&s.positions);
+        self.previous_positions
+            .copy_from_slice(&s.previous_positions);
+        self.velocities.copy_from_slice(&s.velocities);
+        self.motion_tracked = s.motion_tracked;
+        self.met_soft_bodies = s.met_soft_bodies;
+        self.sane_centre = s.sane_centre;
+        self.springs.rest.copy_from_slice(&s.spring_rest);
+        self.springs
+            .plastic_strain
+            .copy_from_slice(&s.plastic_strain);
+        for (a, s) in self.contacts.anchors.iter_mut().zip(&s.friction_anchors) {
+            *a = s.unwrap_or(Vec3::NAN);
+        }
+        self.contacts
+            .static_contact
+            .copy_from_slice(&s.static_contact);
+        self.scratch.soft_anchors.copy_from_slice(&s.soft_anchors);
+        self.scratch.soft_pass = s.soft_pass;
+        self.sleep.restore(&s.sleep);
+        self.clear_kinematic();
+        self.runaway = None;
+        Ok(())
+    }
+}
