@@ -48,10 +48,10 @@ pub mod scenes;
 pub mod surface;
 
 pub use components::{
-    DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
-    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity,
-    SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodySnapshot,
-    SoftBodyStats, StaticCollider,
+    DrivenParticles, PinnedParticles, PointForce, RigidSphere, SoftBody, SoftBodyContacts,
+    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGravity,
+    SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled,
+    SoftBodySnapshot, SoftBodyStats, StaticCollider,
 };
 #[cfg(feature = "render")]
 pub use loading::{
@@ -108,10 +108,10 @@ impl bevy::app::PluginGroup for SoftBodyPlugins {
 pub mod prelude {
     pub use crate::SoftBodyPlugins;
     pub use crate::components::{
-        DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
-        SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity,
-        SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodySnapshot,
-        SoftBodyStats, StaticCollider,
+        DrivenParticles, PinnedParticles, PointForce, RigidSphere, SoftBody, SoftBodyContacts,
+        SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces,
+        SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
+        SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, StaticCollider,
     };
     pub use crate::core::{
         ElasticSettings, Elasticity, ImpulseSettings, Plasticity, SnapshotError, SoftBodyMaterial,

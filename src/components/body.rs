@@ -121,6 +121,26 @@ impl SoftBody {
         self.rest_scale
     }
 
+    /// Gives the whole body the impulse `impulse` (N s, world frame) now: every particle's
+    /// velocity changes by `impulse / M` (a kick, a jump). Wakes the body.
+    pub fn apply_impulse(&mut self, impulse: Vec3) {
+        self.state.apply_impulse(impulse);
+    }
+
+    /// Gives the body the impulse `impulse` (N s, world frame) now, at its point at `point`
+    /// (world frame; for a body not placed yet, the mesh's own): the particles of the tet there
+    /// take it by their barycentric weights, so the body's momentum changes by `impulse` and
+    /// its angular momentum by `point x impulse` (a punch, a bullet). A point outside the body
+    /// acts at the nearest point of the tet it is least outside of. Wakes the body. Returns
+    /// false (and does nothing) for a mesh without a tet of any volume.
+    pub fn apply_impulse_at_point(&mut self, impulse: Vec3, point: Vec3) -> bool {
+        let Some(at) = self.state.body_point(point) else {
+            return false;
+        };
+        self.state.apply_impulse_at(at, impulse);
+        true
+    }
+
     /// The body's state now (see [`SoftBodySnapshot`]).
     pub fn snapshot(&self) -> SoftBodySnapshot {
         SoftBodySnapshot {

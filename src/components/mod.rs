@@ -2,12 +2,14 @@
 
 mod body;
 mod diagnostics;
+mod external;
 mod kinematics;
 pub(crate) mod settings;
 mod world;
 
 pub use body::{SoftBody, SoftBodySnapshot};
 pub use diagnostics::{SoftBodyError, SoftBodyErrorKind, SoftBodyStats};
+pub use external::{PointForce, SoftBodyForces, SoftBodyRadialImpulse};
 pub use kinematics::{DrivenParticles, PinnedParticles};
 pub use settings::{
     SoftBodyContacts, SoftBodyContactsDisabled, SoftBodyRunawayLimits, SoftBodySleepThreshold,

@@ -9,6 +9,7 @@ pub(crate) mod colliders;
 pub(crate) mod contacts;
 pub(crate) mod deviatoric;
 pub(crate) mod embedding;
+pub(crate) mod external;
 pub(crate) mod forces;
 pub(crate) mod geometry;
 pub(crate) mod grid;
@@ -44,6 +45,7 @@ pub use colliders::{
     RigidContacts, RigidSphereState,
 };
 pub use embedding::{EmbeddingError, SurfaceBinding};
+pub use external::BodyPoint;
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::{ImpulseOutcome, StepCounters};
 pub use material::{

@@ -13,14 +13,14 @@ use parry3d::math::Pose;
 use crate::components::settings::{SettingsQuery, core_settings};
 use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
-    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyGravity,
-    SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodyStats,
-    StaticCollider,
+    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGravity,
+    SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled,
+    SoftBodyStats, StaticCollider,
 };
 use crate::core::substep::{spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
-    ColliderInstance, CollisionFilter, Parallel, RigidBodyMotion, RigidSphereState, Serial,
-    SoftBodyState, TetMesh,
+    BodyPoint, ColliderInstance, CollisionFilter, Parallel, RigidBodyMotion, RigidSphereState,
+    Serial, SoftBodyState, TetMesh,
 };
 use crate::core::{Stage, SubstepStage};
 
@@ -46,8 +46,9 @@ pub use timing::{SoftBodyStageTimes, SoftBodyStepTime};
 /// avian's substeps run inside its solver set); [`SoftBodyStepTime`] books each of them.
 #[derive(SystemSet, Debug, Clone, Copy, PartialEq, Eq, Hash)]
 pub enum SoftBodySystems {
-    /// Place new bodies, clear last step's counters, apply pinned and driven particles and the
-    /// settings components, gather the rigid spheres and static colliders.
+    /// Place new bodies, clear last step's counters, apply pinned and driven particles, the
+    /// settings components and the game's forces and impulses ([`SoftBodyForces`],
+    /// [`SoftBodyRadialImpulse`]), gather the rigid spheres and static colliders.
     Prepare,
     /// [`Stage::Forces`]: the paper's springs with damping, gravity and the baseline's volume
     /// forces for bodies in one substep; kinematic particles set moving; the spheres' gravity.
@@ -142,7 +143,10 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<SoftBodyThreads>()
             .register_type::<SoftBodyStepTime>()
             .register_type::<SoftBodyStageTimes>()
-            .add_message::<SoftBodyError>();
+            .register_type::<SoftBodyForces>()
+            .register_type::<SoftBodyRadialImpulse>()
+            .add_message::<SoftBodyError>()
+            .add_message::<SoftBodyRadialImpulse>();
         if let Some(step) = self.time_step
             && self.schedule == FixedUpdate.intern()
         {
@@ -158,7 +162,7 @@ impl Plugin for SoftBodyPlugin {
         }
         app.add_systems(
             self.schedule,
-            (prepare, apply_settings, gather_spheres)
+            (prepare, apply_settings, apply_external, gather_spheres)
                 .chain()
                 .in_set(SoftBodySystems::Prepare),
         );

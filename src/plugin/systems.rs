@@ -165,6 +165,48 @@ pub(super) fn apply_settings(mut bodies: Query<(&mut SoftBody, SettingsQuery)>) 
     }
 }
 
+/// The game's forces and explosions for this step: each body's [`SoftBodyForces`] as the
+/// impulse `h F` (a point force bound to its material point on its first step) and every
+/// [`SoftBodyRadialImpulse`] written since the last step. Nothing without a step.
+pub(super) fn apply_external(
+    time: Res<Time>,
+    mut explosions: MessageReader<SoftBodyRadialImpulse>,
+    mut read: Local<Vec<SoftBodyRadialImpulse>>,
+    mut bodies: Query<(&mut SoftBody, Option<Mut<SoftBodyForces>>)>,
+) {
+    let h = time.delta_secs();
+    if h <= 0.0 {
+        return;
+    }
+    read.clear();
+    read.extend(explosions.read().copied());
+    for (mut body, forces) in &mut bodies {
+        let state = &mut body.state;
+        for e in read.iter() {
+            state.apply_radial_impulse(e.centre, e.radius, e.impulse);
+        }
+        let Some(mut forces) = forces else { continue };
+        if forces.force != Vec3::ZERO {
+            state.apply_impulse(h * forces.force);
+        }
+        if forces.at_points.iter().any(|f| f.bound.is_none()) {
+            for f in &mut forces.at_points {
+                if f.bound.is_none() {
+                    f.bound = state.body_point(f.point).map(|p| (p.tet, p.weights));
+                }
+            }
+        }
+        for f in &forces.at_points {
+            if let Some((tet, weights)) = f.bound
+                && f.force != Vec3::ZERO
+                && (tet as usize) < state.mesh().tets().len()
+            {
+                state.apply_impulse_at(BodyPoint { tet, weights }, h * f.force);
+            }
+        }
+    }
+}
+
 /// The rigid spheres and static colliders as the solver sees them during one step, gathered
 /// once in [`SoftBodySystems::Prepare`]. The spheres are changed by the contact and volume passes
 /// (particles pressed against a sphere move it) and written back in [`SoftBodySystems::Writeback`];

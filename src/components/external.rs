@@ -1,0 +1,85 @@
+//! Forces and impulses a game gives soft bodies, in the style of the rigid-body engines: a
+//! force for as long as its component is present ([`SoftBodyForces`]), an impulse applied once
+//! ([`SoftBody::apply_impulse`](super::SoftBody::apply_impulse),
+//! [`SoftBody::apply_impulse_at_point`](super::SoftBody::apply_impulse_at_point)), and an
+//! explosion pushing every body within a sphere ([`SoftBodyRadialImpulse`]).
+
+use bevy::prelude::*;
+
+/// Forces on the [`SoftBody`](super::SoftBody) on the same entity, applied in every step for as
+/// long as the component is present (N, world frame): wind, a thruster, a tractor beam. Each
+/// step gives the body the impulse `h F` at its start.
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::prelude::*;
+///
+/// // A 20 N wind along +x on the whole body, and a 5 N lift at a point of it.
+/// let forces = SoftBodyForces {
+///     force: Vec3::X * 20.0,
+///     at_points: vec![PointForce::new(Vec3::new(0.1, 0.5, 0.0), Vec3::Y * 5.0)],
+/// };
+/// ```
+#[derive(Component, Clone, Debug, Default, Reflect)]
+#[reflect(Component)]
+pub struct SoftBodyForces {
+    /// On the whole body, spread over its particles by mass (every particle accelerated alike).
+    pub force: Vec3,
+    /// At points of the body, each following the material it was first applied to.
+    pub at_points: Vec<PointForce>,
+}
+
+/// A force at a point of a soft body. The point is a world position when the force is first
+/// applied; from then on it is the point of the material that was there (a tet and its
+/// barycentric weights), so a thruster stays where it was mounted as the body turns and
+/// deforms. A point outside the body acts at the nearest point of the tet it is least outside
+/// of.
+#[derive(Clone, Debug, Reflect)]
+pub struct PointForce {
+    /// Where it acts, in the world, when first applied.
+    pub point: Vec3,
+    /// The force, N, world frame.
+    pub force: Vec3,
+    /// The material point it was bound to on its first step: the tet and its weights
+    /// (reflected, so that a saved game keeps it).
+    pub(crate) bound: Option<(u32, [f32; 4])>,
+}
+
+impl PointForce {
+    /// `force` at the body's point at `point` (world) when first applied.
+    pub fn new(point: Vec3, force: Vec3) -> Self {
+        PointForce {
+            point,
+            force,
+            bound: None,
+        }
+    }
+}
+
+/// An explosion: every soft body with particles within `radius` of `centre` is pushed away
+/// from it, in the next step. Each particle within the sphere takes an impulse away from the
+/// centre of `impulse * (1 - d / radius)` times its share of its body's mass (`d` its
+/// distance), so a body at the centre takes about `impulse` (N s) in all and one at the edge
+/// nothing; a heavy body is thrown slower than a light one. Write it as a message:
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::prelude::*;
+///
+/// fn explode(mut explosions: MessageWriter<SoftBodyRadialImpulse>) {
+///     explosions.write(SoftBodyRadialImpulse {
+///         centre: Vec3::ZERO,
+///         radius: 2.0,
+///         impulse: 50.0,
+///     });
+/// }
+/// ```
+#[derive(Message, Clone, Copy, Debug, PartialEq, Reflect)]
+pub struct SoftBodyRadialImpulse {
+    /// The centre, world frame.
+    pub centre: Vec3,
+    /// The radius, m.
+    pub radius: f32,
+    /// The impulse a body at the centre takes, N s.
+    pub impulse: f32,
+}
