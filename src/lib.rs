@@ -25,7 +25,13 @@
 #![deny(missing_docs)]
 
 /// The README's code, compiled (and, where it can run headless, run) by `cargo test`.
-#[cfg(all(doctest, feature = "render", feature = "avian"))]
+#[cfg(all(
+    doctest,
+    feature = "render",
+    feature = "avian",
+    feature = "serialize",
+    feature = "picking"
+))]
 #[doc = include_str!("../README.md")]
 pub struct ReadmeDoctests;
 
@@ -41,6 +47,8 @@ pub mod game_scenes;
 pub mod inspector;
 #[cfg(feature = "render")]
 pub mod loading;
+#[cfg(feature = "picking")]
+pub mod picking;
 pub mod plugin;
 #[cfg(any(test, feature = "scenes"))]
 pub mod scenes;
@@ -49,9 +57,9 @@ pub mod surface;
 
 pub use components::{
     DrivenParticles, PinnedParticles, PointForce, RigidSphere, SoftBody, SoftBodyContacts,
-    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGravity,
-    SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled,
-    SoftBodySnapshot, SoftBodyStats, StaticCollider,
+    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
+    SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
+    SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, StaticCollider,
 };
 #[cfg(feature = "render")]
 pub use loading::{
@@ -100,6 +108,8 @@ impl bevy::app::PluginGroup for SoftBodyPlugins {
         let group = group
             .add(SoftBodySurfacePlugin)
             .add(SoftBodyAssetPlugin::default());
+        #[cfg(feature = "picking")]
+        let group = group.add(picking::SoftBodyPickingPlugin);
         group
     }
 }
@@ -109,7 +119,7 @@ pub mod prelude {
     pub use crate::SoftBodyPlugins;
     pub use crate::components::{
         DrivenParticles, PinnedParticles, PointForce, RigidSphere, SoftBody, SoftBodyContacts,
-        SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces,
+        SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
         SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
         SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, StaticCollider,
     };
@@ -121,6 +131,8 @@ pub mod prelude {
     pub use crate::loading::{
         SoftBodyAssetPlugin, SoftBodyFromAsset, SoftBodySource, TetMeshAsset,
     };
+    #[cfg(feature = "picking")]
+    pub use crate::picking::{SoftBodyDraggable, SoftBodyHit, SoftBodyPickingPlugin};
     pub use crate::plugin::{SoftBodyPlugin, SoftBodySystems, SoftBodyThreads};
     #[cfg(feature = "render")]
     pub use crate::surface::{SoftBodySurface, SoftBodySurfacePlugin};

@@ -83,3 +83,66 @@ pub struct SoftBodyRadialImpulse {
     /// The impulse a body at the centre takes, N s.
     pub impulse: f32,
 }
+
+/// A grab: the [`SoftBody`](super::SoftBody) on the same entity pulled by a handful of its
+/// material toward `target` with a spring, for as long as the component is present (a hand, a
+/// hook, the mouse: with feature `picking`, `SoftBodyDraggable` inserts and moves it from the
+/// pointer). The handful is the particles within `radius` of `point` when the grab is first
+/// applied (nearer ones holding more); they then carry the grab as the body moves and
+/// deforms. The spring pulls the whole body, integrated implicitly for its mass (any stiffness
+/// is stable), up to `max_force`; what the body touches (the ground, avian's bodies) pushes
+/// back as it is dragged into it.
+///
+/// ```
+/// use bevy::prelude::*;
+/// use bevy_soft_body::prelude::*;
+///
+/// // Pull the body's point at (0, 0.5, 0) up to (0, 2, 0), 300 N/m, at most 200 N.
+/// let mut grab = SoftBodyGrab::new(Vec3::new(0.0, 0.5, 0.0), 300.0).with_target(Vec3::Y * 2.0);
+/// grab.max_force = 200.0;
+/// ```
+#[derive(Component, Clone, Debug, Reflect)]
+#[reflect(Component)]
+pub struct SoftBodyGrab {
+    /// The grabbed point, world frame, when first applied.
+    pub point: Vec3,
+    /// Where the spring pulls it, world frame; a game moves it.
+    pub target: Vec3,
+    /// The spring's stiffness, N/m.
+    pub stiffness: f32,
+    /// The spring's damper, N s/m.
+    pub damping: f32,
+    /// The largest force, N.
+    pub max_force: f32,
+    /// How far around `point` the grab holds the material, m; `None`: a tenth of the body's
+    /// size (the diagonal of its rest shape's box).
+    pub radius: Option<f32>,
+    /// The particles held and their weights, found on the grab's first step (reflected, so
+    /// that a saved game keeps them), and where `point` was from their weighted mean then.
+    pub(crate) held: Vec<(u32, f32)>,
+    pub(crate) offset: Vec3,
+}
+
+impl SoftBodyGrab {
+    /// A grab of the body's point at `point` (world), held where it is until
+    /// [`with_target`](Self::with_target) or a change of `target` moves it; a damper of a
+    /// tenth of the stiffness, in N s/m; no largest force; the default radius.
+    pub fn new(point: Vec3, stiffness: f32) -> Self {
+        SoftBodyGrab {
+            point,
+            target: point,
+            stiffness,
+            damping: 0.1 * stiffness,
+            max_force: f32::INFINITY,
+            radius: None,
+            held: Vec::new(),
+            offset: Vec3::ZERO,
+        }
+    }
+
+    /// The same grab pulling toward `target`.
+    pub fn with_target(mut self, target: Vec3) -> Self {
+        self.target = target;
+        self
+    }
+}

@@ -9,7 +9,7 @@ mod world;
 
 pub use body::{SoftBody, SoftBodySnapshot};
 pub use diagnostics::{SoftBodyError, SoftBodyErrorKind, SoftBodyStats};
-pub use external::{PointForce, SoftBodyForces, SoftBodyRadialImpulse};
+pub use external::{PointForce, SoftBodyForces, SoftBodyGrab, SoftBodyRadialImpulse};
 pub use kinematics::{DrivenParticles, PinnedParticles};
 pub use settings::{
     SoftBodyContacts, SoftBodyContactsDisabled, SoftBodyRunawayLimits, SoftBodySleepThreshold,

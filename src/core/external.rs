@@ -118,4 +118,84 @@ impl SoftBodyState {
         }
         true
     }
+
+    /// The particles a grab at `point` (world) holds: those within `radius` of it, each
+    /// weighted by `1 - d / radius`, or the nearest particle alone if none is within it.
+    /// Kinematic particles are left out. Empty for a body without free particles.
+    pub fn grab_patch(&self, point: Vec3, radius: f32) -> Vec<(u32, f32)> {
+        let free = |i: &usize| self.inv_masses[*i] > 0.0;
+        let mut patch: Vec<(u32, f32)> = (0..self.positions.len())
+            .filter(free)
+            .filter_map(|i| {
+                let d = self.positions[i].distance(point);
+                (d < radius).then(|| (i as u32, 1.0 - d / radius))
+            })
+            .collect();
+        if patch.is_empty() {
+            let nearest = (0..self.positions.len()).filter(free).min_by(|&a, &b| {
+                let (da, db) = (self.positions[a], self.positions[b]);
+                da.distance_squared(point)
+                    .total_cmp(&db.distance_squared(point))
+            });
+            patch.extend(nearest.map(|i| (i as u32, 1.0)));
+        }
+        patch
+    }
+
+    /// Where a grab's `patch` ([`SoftBodyState::grab_patch`]) is now and how fast it moves:
+    /// its particles' mean, weighted by their weights and masses.
+    pub fn patch_motion(&self, patch: &[(u32, f32)]) -> (Vec3, Vec3) {
+        let (mut x, mut v, mut sum) = (Vec3::ZERO, Vec3::ZERO, 0.0);
+        for &(i, w) in patch {
+            let wm = w * self.masses[i as usize];
+            x += wm * self.positions[i as usize];
+            v += wm * self.velocities[i as usize];
+            sum += wm;
+        }
+        (x / sum, v / sum)
+    }
+
+    /// Pulls a grab's `patch` toward `target` for a step of `h` with a spring of `stiffness`
+    /// (N/m) and a damper of `damping` (N s/m) on the whole body, at most `max_force` (N), as
+    /// a hand does. The spring is integrated implicitly (backward Euler) for the body's mass,
+    /// so it never overshoots however stiff; its impulse is shared by the patch's particles by
+    /// their weights, and the patch is never given more speed than takes it to the target
+    /// within the step, so that a heavy body on a stiff spring follows over several steps
+    /// rather than having its grabbed part flung ahead. Wakes the body.
+    pub fn pull_patch(
+        &mut self,
+        patch: &[(u32, f32)],
+        target: Vec3,
+        spring: [f32; 2],
+        max_force: f32,
+        h: f32,
+    ) {
+        let [k, c] = spring;
+        let valid = |&(i, w): &(u32, f32)| (i as usize) < self.positions.len() && w > 0.0;
+        if patch.is_empty()
+            || !patch.iter().all(valid)
+            || !(k >= 0.0 && c >= 0.0 && max_force >= 0.0 && target.is_finite())
+        {
+            return;
+        }
+        let (x, v) = self.patch_motion(patch);
+        let mass: f32 = self.masses.iter().sum();
+        let v_next = (v + (h / mass) * k * (target - x)) / (1.0 + h * c / mass + h * h * k / mass);
+        let impulse = (mass * (v_next - v)).clamp_length_max(max_force * h);
+        let weighted_mass: f32 = patch
+            .iter()
+            .map(|&(i, w)| w * self.masses[i as usize])
+            .sum();
+        let reach = ((target - x) / h - v).length();
+        let fastest = impulse.length() / weighted_mass;
+        let scale = if fastest > reach {
+            reach / fastest
+        } else {
+            1.0
+        };
+        self.wake_up();
+        for &(i, w) in patch {
+            self.velocities[i as usize] += impulse * (scale * w / weighted_mass);
+        }
+    }
 }

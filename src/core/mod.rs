@@ -19,6 +19,7 @@ pub(crate) mod material;
 pub(crate) mod mesh_check;
 pub(crate) mod obj;
 pub(crate) mod parallel;
+pub(crate) mod ray_cast;
 #[cfg(test)]
 pub(crate) mod reference;
 pub(crate) mod roots;
@@ -55,6 +56,7 @@ pub use material::{
 pub use mesh_check::{LISTED_DEFECTS, MeshDefects};
 pub use obj::{ObjError, ObjErrorKind, parse_obj, write_obj};
 pub use parallel::{Parallel, Serial};
+pub use ray_cast::SurfaceHit;
 pub use runaway::{Runaway, RunawayLimits};
 pub use sleep::SleepSettings;
 pub use snapshot::{MeshFingerprint, SNAPSHOT_VERSION, SnapshotError, StateSnapshot};

@@ -13,9 +13,9 @@ use parry3d::math::Pose;
 use crate::components::settings::{SettingsQuery, core_settings};
 use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
-    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGravity,
-    SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold, SoftBodySleepingDisabled,
-    SoftBodyStats, StaticCollider,
+    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
+    SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
+    SoftBodySleepingDisabled, SoftBodyStats, StaticCollider,
 };
 use crate::core::substep::{spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
@@ -144,6 +144,7 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<SoftBodyStepTime>()
             .register_type::<SoftBodyStageTimes>()
             .register_type::<SoftBodyForces>()
+            .register_type::<SoftBodyGrab>()
             .register_type::<SoftBodyRadialImpulse>()
             .add_message::<SoftBodyError>()
             .add_message::<SoftBodyRadialImpulse>();

@@ -165,14 +165,22 @@ pub(super) fn apply_settings(mut bodies: Query<(&mut SoftBody, SettingsQuery)>) 
     }
 }
 
-/// The game's forces and explosions for this step: each body's [`SoftBodyForces`] as the
-/// impulse `h F` (a point force bound to its material point on its first step) and every
-/// [`SoftBodyRadialImpulse`] written since the last step. Nothing without a step.
+/// A body with the game's forces and grab, if it has them.
+pub(super) type PushedBody<'a> = (
+    &'a mut SoftBody,
+    Option<Mut<'a, SoftBodyForces>>,
+    Option<Mut<'a, SoftBodyGrab>>,
+);
+
+/// The game's forces, grabs and explosions for this step: each body's [`SoftBodyForces`] as
+/// the impulse `h F` and its [`SoftBodyGrab`]'s spring (points bound to the material on their
+/// first step), and every [`SoftBodyRadialImpulse`] written since the last step. Nothing
+/// without a step.
 pub(super) fn apply_external(
     time: Res<Time>,
     mut explosions: MessageReader<SoftBodyRadialImpulse>,
     mut read: Local<Vec<SoftBodyRadialImpulse>>,
-    mut bodies: Query<(&mut SoftBody, Option<Mut<SoftBodyForces>>)>,
+    mut bodies: Query<PushedBody>,
 ) {
     let h = time.delta_secs();
     if h <= 0.0 {
@@ -180,10 +188,29 @@ pub(super) fn apply_external(
     }
     read.clear();
     read.extend(explosions.read().copied());
-    for (mut body, forces) in &mut bodies {
+    let bind = |state: &SoftBodyState, bound: Option<(u32, [f32; 4])>, point: Vec3| {
+        let tets = state.mesh().tets().len();
+        match bound {
+            Some((tet, weights)) if (tet as usize) < tets => Some(BodyPoint { tet, weights }),
+            _ => state.body_point(point),
+        }
+    };
+    for (mut body, forces, grab) in &mut bodies {
         let state = &mut body.state;
         for e in read.iter() {
             state.apply_radial_impulse(e.centre, e.radius, e.impulse);
+        }
+        if let Some(mut grab) = grab {
+            if grab.held.is_empty() {
+                let radius = grab.radius.unwrap_or(0.1 * state.rest_extent);
+                let held = state.grab_patch(grab.point, radius);
+                if !held.is_empty() {
+                    grab.offset = grab.point - state.patch_motion(&held).0;
+                }
+                grab.held = held;
+            }
+            let (target, spring) = (grab.target - grab.offset, [grab.stiffness, grab.damping]);
+            state.pull_patch(&grab.held, target, spring, grab.max_force, h);
         }
         let Some(mut forces) = forces else { continue };
         if forces.force != Vec3::ZERO {
@@ -197,11 +224,10 @@ pub(super) fn apply_external(
             }
         }
         for f in &forces.at_points {
-            if let Some((tet, weights)) = f.bound
+            if let Some(p) = bind(state, f.bound, f.point)
                 && f.force != Vec3::ZERO
-                && (tet as usize) < state.mesh().tets().len()
             {
-                state.apply_impulse_at(BodyPoint { tet, weights }, h * f.force);
+                state.apply_impulse_at(p, h * f.force);
             }
         }
     }
