@@ -63,7 +63,7 @@ fn an_impulse_at_a_point_gives_the_momentum_and_the_angular_momentum_it_should()
             assert!(acts_at.distance(point) < c.distance(point));
         }
         let (p0, l0) = momenta(&body);
-        body.apply_impulse_at(at, impulse);
+        body.forces().apply_impulse_at(at, impulse);
         let (p1, l1) = momenta(&body);
         let j = impulse.as_dvec3();
         let dp = p1 - p0 - j;
@@ -80,7 +80,7 @@ fn an_impulse_at_a_point_gives_the_momentum_and_the_angular_momentum_it_should()
     // The whole body: every particle the same change, `J / M`.
     let before = body.velocities().to_vec();
     let mass: f32 = body.masses().iter().sum();
-    body.apply_impulse(impulse);
+    body.forces().apply_impulse(impulse);
     for (v, v0) in body.velocities().iter().zip(before) {
         assert!((*v - v0 - impulse / mass).length() < 1e-5);
     }

@@ -124,7 +124,7 @@ impl SoftBody {
     /// Gives the whole body the impulse `impulse` (N s, world frame) now: every particle's
     /// velocity changes by `impulse / M` (a kick, a jump). Wakes the body.
     pub fn apply_impulse(&mut self, impulse: Vec3) {
-        self.state.apply_impulse(impulse);
+        self.state.forces().apply_impulse(impulse);
     }
 
     /// Gives the body the impulse `impulse` (N s, world frame) now, at its point at `point`
@@ -137,7 +137,7 @@ impl SoftBody {
         let Some(at) = self.state.body_point(point) else {
             return false;
         };
-        self.state.apply_impulse_at(at, impulse);
+        self.state.forces().apply_impulse_at(at, impulse);
         true
     }
 
@@ -160,7 +160,7 @@ impl SoftBody {
             // Spawned anew and not placed: its mesh is the one given, the snapshot's the one
             // placement scaled (`plugin::prepare`).
             let damaged = |e: String| SnapshotError::Damaged(format!("rest scale: {e}"));
-            let mesh = crate::plugin::scaled_mesh(self.state.mesh(), snapshot.rest_scale)
+            let mesh = (self.state.mesh().scaled(snapshot.rest_scale))
                 .map_err(|e| damaged(e.to_string()))?;
             let mut state = SoftBodyState::new(mesh.into(), *self.state.material())?;
             state.set_soft_contact_settings(self.state.soft_contact_settings());

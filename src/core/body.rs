@@ -7,19 +7,20 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use super::boundary::{Boundary, SoftContactSettings};
-use super::chunks::{ChunkFindings, in_particle_chunks};
+use super::chunks::in_particle_chunks;
 use super::colliders::{ColliderInstance, CollisionFilter, RigidContacts, RigidSphereState};
 use super::contacts::{ContactBody, ContactState};
-use super::deviatoric::{ShapeBundle, shape_bundles};
+use super::external::{BodyForces, BodyPoint, body_point, point_position};
 use super::forces::Springs;
 use super::geometry::signed_volume;
 use super::impulses::{PassBody, StepCounters, VolumePassScratch};
-use super::lanes::Point4;
 use super::material::{MaterialError, SoftBodyMaterial};
-use super::parallel::{BlockFlags, Parallel, SharedSlice};
+use super::parallel::{Parallel, SharedSlice};
+use super::ray_cast::{SurfaceHit, ray_cast};
 use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
 use super::sleep::{Sleep, SleepSettings};
-use super::substep_plan::{SubstepClock, SubstepPlan};
+use super::snapshot::{MeshFingerprint, SNAPSHOT_VERSION, SnapshotError, StateSnapshot};
+use super::step_scratch::StepScratch;
 use super::tet_mesh::TetMesh;
 
 /// A particle index that does not exist in the body's mesh.
@@ -105,51 +106,6 @@ pub struct SoftBodyState {
     pub(crate) scratch: StepScratch,
 }
 
-/// A step's working memory, and what a step keeps from the last only to save work (clamp
-/// bounds, the guess of which rings need correcting, the shape model's bundles): none of it is
-/// the body's physical state; what it carries between steps decides how much work a step does,
-/// not what it computes (the tests hold every shortcut to the plain passes). Kept in the body
-/// so that a step allocates nothing.
-#[derive(Clone, Debug)]
-pub(crate) struct StepScratch {
-    /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
-    /// passes. Kept zero between uses so that the passes never clear the whole array.
-    pub(crate) per_particle: Vec<Vec3>,
-    /// Predicted positions `x + h v` during the volume passes, kept in step with every velocity
-    /// change there (`apply_velocity_change`), so the passes read one array, not two.
-    /// Four numbers each, so that four are gathered into SIMD lanes with a load each.
-    pub(crate) predicted: Vec<Point4>,
-    /// One per block and phase: whether its job in the running pass is done.
-    pub(crate) block_done: BlockFlags,
-    /// Sphere positions saved during a substep's contacts (reused, so steps do not allocate).
-    pub(crate) sphere_positions: Vec<Vec3>,
-    /// One per chunk of particles: what each job of the contacts and the integration found.
-    pub(crate) chunk_findings: Vec<ChunkFindings>,
-    /// Velocities before a substep's volume impulses (see `substep.rs`).
-    pub(crate) substep_velocities: Vec<Vec3>,
-    /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
-    pub(crate) shape_bundles: Vec<ShapeBundle>,
-    /// This step's substeps, from their plan to the step's finish (`substep.rs`).
-    pub(crate) substep_plan: Option<SubstepPlan>,
-    /// The time spent in each stage of the substeps, when the plugin times them.
-    pub(crate) substep_clock: SubstepClock,
-    /// The particles the last soft-contact pass touched and their normals (`soft_contacts.rs`).
-    pub(crate) soft_touched: Vec<(u32, Vec3)>,
-    /// This substep's soft contacts of this body's particles (`soft_contacts.rs`).
-    pub(crate) soft_supports: Vec<crate::core::soft_records::SoftSupport>,
-    /// What this body's volume impulses handed to other bodies this substep.
-    pub(crate) soft_reactions: Vec<crate::core::soft_records::SoftReaction>,
-    /// Per particle, where static friction holds it on another body (`soft_contacts.rs`).
-    pub(crate) soft_anchors: Vec<crate::core::soft_records::SoftAnchor>,
-    /// The number of substep soft-contact passes so far: which anchors are current.
-    pub(crate) soft_pass: u32,
-    /// Per particle, the velocity the volume impulses' pushes into another soft body lost to
-    /// `constrain_direction` in this substep: what is handed to that body.
-    pub(crate) soft_removed: Vec<Vec3>,
-    /// The soft contacts of this body's particles since the count was last taken.
-    pub(crate) soft_count: u32,
-}
-
 impl SoftBodyState {
     /// A body at the mesh's rest positions, at rest.
     pub fn new(mesh: Arc<TetMesh>, material: SoftBodyMaterial) -> Result<Self, MaterialError> {
@@ -187,24 +143,7 @@ impl SoftBodyState {
                 (hi - lo).length()
             },
             volume_passes: VolumePassScratch::for_mesh(&mesh),
-            scratch: StepScratch {
-                per_particle: vec![Vec3::ZERO; n],
-                predicted: vec![Point4::default(); n],
-                block_done: BlockFlags::new(2 * mesh.blocks().count()),
-                sphere_positions: Vec::new(),
-                chunk_findings: ChunkFindings::for_particles(n),
-                substep_plan: None,
-                substep_clock: SubstepClock::default(),
-                soft_touched: Vec::new(),
-                soft_supports: Vec::new(),
-                soft_reactions: Vec::new(),
-                soft_anchors: vec![crate::core::soft_records::SoftAnchor::NONE; n],
-                soft_pass: 1,
-                soft_removed: vec![Vec3::ZERO; n],
-                soft_count: 0,
-                substep_velocities: vec![Vec3::ZERO; n],
-                shape_bundles: shape_bundles(&mesh),
-            },
+            scratch: StepScratch::for_mesh(&mesh),
             mesh,
         };
         body.update_masses();
@@ -430,6 +369,94 @@ impl SoftBodyState {
     #[cfg(test)]
     pub(crate) fn refresh_predicted(&mut self, h: f32) {
         self.pass_body().refresh_predicted(h);
+    }
+
+    /// The particles lent for the game's impulses, forces and grabs (see [`BodyForces`]).
+    pub fn forces(&mut self) -> BodyForces<'_> {
+        BodyForces {
+            mesh: &self.mesh,
+            positions: &self.positions,
+            velocities: &mut self.velocities,
+            masses: &self.masses,
+            inv_masses: &self.inv_masses,
+            sleep: &mut self.sleep,
+        }
+    }
+
+    /// The point of the body at `world` now: in the tet that contains it, or, for a point
+    /// outside the body, the nearest point of the tet it is least outside of. `None` for a
+    /// body without a tet of any volume.
+    pub fn body_point(&self, world: Vec3) -> Option<BodyPoint> {
+        body_point(&self.mesh, &self.positions, world)
+    }
+
+    /// Where `point` of the body is now.
+    pub fn point_position(&self, point: BodyPoint) -> Vec3 {
+        point_position(&self.mesh, &self.positions, point)
+    }
+
+    /// The first point of the body's deformed surface (its boundary triangles where the
+    /// particles are now) that a ray from `origin` along `direction` meets within
+    /// `max_distance` (in units of `direction`'s length), from either side.
+    pub fn ray_cast(&self, origin: Vec3, direction: Vec3, max_distance: f32) -> Option<SurfaceHit> {
+        let triangles = &self.boundary.triangles;
+        ray_cast(&self.positions, triangles, origin, direction, max_distance)
+    }
+
+    /// The body's state now, to restore later into this body or another of the same mesh
+    /// (see `snapshot.rs`).
+    pub fn snapshot(&self) -> StateSnapshot {
+        let anchors = self.contacts.anchors.iter();
+        StateSnapshot {
+            version: SNAPSHOT_VERSION,
+            mesh: MeshFingerprint::of(&self.mesh),
+            material: self.material,
+            positions: self.positions.clone(),
+            previous_positions: self.previous_positions.clone(),
+            velocities: self.velocities.clone(),
+            motion_tracked: self.motion_tracked,
+            met_soft_bodies: self.met_soft_bodies,
+            sane_centre: self.sane_centre,
+            spring_rest: self.springs.rest.clone(),
+            plastic_strain: self.springs.plastic_strain.clone(),
+            friction_anchors: anchors.map(|a| a.is_finite().then_some(*a)).collect(),
+            static_contact: self.contacts.static_contact.clone(),
+            soft_anchors: self.scratch.soft_anchors.clone(),
+            soft_pass: self.scratch.soft_pass,
+            sleep: self.sleep.snapshot(),
+        }
+    }
+
+    /// Puts the body back in the state `snapshot` holds. It must be of this body's mesh and of
+    /// this build's [`SNAPSHOT_VERSION`]; anything that does not fit is an error and leaves
+    /// the body as it was. The settings a game gives (sleep threshold, contacts, collision
+    /// filter, runaway limits) stay this body's.
+    pub fn restore(&mut self, snapshot: &StateSnapshot) -> Result<(), SnapshotError> {
+        let s = snapshot;
+        s.check(&self.mesh, self.springs.rest.len())?;
+        self.set_material(s.material)?;
+        self.positions.copy_from_slice(&s.positions);
+        self.previous_positions
+            .copy_from_slice(&s.previous_positions);
+        self.velocities.copy_from_slice(&s.velocities);
+        (self.motion_tracked, self.met_soft_bodies) = (s.motion_tracked, s.met_soft_bodies);
+        self.sane_centre = s.sane_centre;
+        self.springs.rest.copy_from_slice(&s.spring_rest);
+        self.springs
+            .plastic_strain
+            .copy_from_slice(&s.plastic_strain);
+        for (a, s) in self.contacts.anchors.iter_mut().zip(&s.friction_anchors) {
+            *a = s.unwrap_or(Vec3::NAN);
+        }
+        self.contacts
+            .static_contact
+            .copy_from_slice(&s.static_contact);
+        self.scratch.soft_anchors.copy_from_slice(&s.soft_anchors);
+        self.scratch.soft_pass = s.soft_pass;
+        self.sleep.restore(&s.sleep);
+        self.clear_kinematic();
+        self.runaway = None;
+        Ok(())
     }
 
     /// The body as its contact passes see it (see [`ContactBody`]).

@@ -30,6 +30,7 @@ pub(crate) mod soft_broad_phase;
 pub(crate) mod soft_contacts;
 pub(crate) mod soft_lockstep;
 pub(crate) mod soft_records;
+pub(crate) mod step_scratch;
 pub(crate) mod substep;
 pub(crate) mod substep_plan;
 pub(crate) mod surface_mesh;
@@ -46,7 +47,7 @@ pub use colliders::{
     RigidContacts, RigidSphereState,
 };
 pub use embedding::{EmbeddingError, SurfaceBinding};
-pub use external::BodyPoint;
+pub use external::{BodyForces, BodyPoint};
 pub use grid::{GridError, box_grid, sdf_grid};
 pub use impulses::{ImpulseOutcome, StepCounters};
 pub use material::{

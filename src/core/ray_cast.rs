@@ -3,8 +3,6 @@
 
 use glam::Vec3;
 
-use super::body::SoftBodyState;
-
 /// Where a ray met a body's surface.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct SurfaceHit {
@@ -22,57 +20,61 @@ pub struct SurfaceHit {
     pub particle: u32,
 }
 
-impl SoftBodyState {
-    /// The first point of the body's surface a ray from `origin` along `direction` meets
-    /// within `max_distance` (in units of `direction`'s length), from either side.
-    pub fn ray_cast(&self, origin: Vec3, direction: Vec3, max_distance: f32) -> Option<SurfaceHit> {
-        if !self.ray_meets_bounds(origin, direction, max_distance) {
-            return None;
-        }
-        let mut best: Option<SurfaceHit> = None;
-        for &triangle in &self.boundary.triangles {
-            let [a, b, c] = triangle.map(|i| self.positions[i as usize]);
-            let Some((t, u, v)) = ray_triangle(origin, direction, a, b, c) else {
-                continue;
-            };
-            if t > max_distance || best.is_some_and(|h| h.distance <= t) {
-                continue;
-            }
-            let weights = Vec3::new(1.0 - u - v, u, v);
-            let corner = if weights.x >= weights.y && weights.x >= weights.z {
-                0
-            } else if weights.y >= weights.z {
-                1
-            } else {
-                2
-            };
-            best = Some(SurfaceHit {
-                distance: t,
-                point: origin + t * direction,
-                normal: (b - a).cross(c - a).normalize_or_zero(),
-                triangle,
-                weights,
-                particle: triangle[corner],
-            });
-        }
-        best
+/// The first point of the surface of `triangles` at `positions` that a ray from `origin` along
+/// `direction` meets within `max_distance` (see
+/// [`SoftBodyState::ray_cast`](super::SoftBodyState::ray_cast)).
+pub(crate) fn ray_cast(
+    positions: &[Vec3],
+    triangles: &[[u32; 3]],
+    origin: Vec3,
+    direction: Vec3,
+    max_distance: f32,
+) -> Option<SurfaceHit> {
+    if !ray_meets_bounds(positions, origin, direction, max_distance) {
+        return None;
     }
+    let mut best: Option<SurfaceHit> = None;
+    for &triangle in triangles {
+        let [a, b, c] = triangle.map(|i| positions[i as usize]);
+        let Some((t, u, v)) = ray_triangle(origin, direction, a, b, c) else {
+            continue;
+        };
+        if t > max_distance || best.is_some_and(|h| h.distance <= t) {
+            continue;
+        }
+        let weights = Vec3::new(1.0 - u - v, u, v);
+        let corner = if weights.x >= weights.y && weights.x >= weights.z {
+            0
+        } else if weights.y >= weights.z {
+            1
+        } else {
+            2
+        };
+        best = Some(SurfaceHit {
+            distance: t,
+            point: origin + t * direction,
+            normal: (b - a).cross(c - a).normalize_or_zero(),
+            triangle,
+            weights,
+            particle: triangle[corner],
+        });
+    }
+    best
+}
 
-    /// Whether the ray can meet the box around the particles (slab test).
-    fn ray_meets_bounds(&self, origin: Vec3, direction: Vec3, max_distance: f32) -> bool {
-        let (lo, hi) = self
-            .positions
-            .iter()
-            .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &x| {
-                (lo.min(x), hi.max(x))
-            });
-        let inv = direction.recip();
-        let (t0, t1) = ((lo - origin) * inv, (hi - origin) * inv);
-        let near = t0.min(t1).max_element().max(0.0);
-        let far = t0.max(t1).min_element().min(max_distance);
-        // A NaN (a ray along a face of the box) keeps the triangles in play.
-        near.partial_cmp(&far) != Some(std::cmp::Ordering::Greater)
-    }
+/// Whether the ray can meet the box around `positions` (slab test).
+fn ray_meets_bounds(positions: &[Vec3], origin: Vec3, direction: Vec3, max_distance: f32) -> bool {
+    let (lo, hi) = positions
+        .iter()
+        .fold((Vec3::INFINITY, Vec3::NEG_INFINITY), |(lo, hi), &x| {
+            (lo.min(x), hi.max(x))
+        });
+    let inv = direction.recip();
+    let (t0, t1) = ((lo - origin) * inv, (hi - origin) * inv);
+    let near = t0.min(t1).max_element().max(0.0);
+    let far = t0.max(t1).min_element().min(max_distance);
+    // A NaN (a ray along a face of the box) keeps the triangles in play.
+    near.partial_cmp(&far) != Some(std::cmp::Ordering::Greater)
 }
 
 /// Möller-Trumbore: the distance `t` along the ray and the barycentric `u`, `v` of its meeting

@@ -20,7 +20,6 @@
 
 use glam::Vec3;
 
-use super::body::SoftBodyState;
 use super::material::{MaterialError, SoftBodyMaterial};
 use super::soft_records::SoftAnchor;
 use super::tet_mesh::TetMesh;
@@ -74,24 +73,24 @@ pub struct StateSnapshot {
     pub version: u32,
     /// The mesh it was taken of.
     pub mesh: MeshFingerprint,
-    material: SoftBodyMaterial,
-    positions: Vec<Vec3>,
-    previous_positions: Vec<Vec3>,
-    velocities: Vec<Vec3>,
-    motion_tracked: bool,
-    met_soft_bodies: bool,
-    sane_centre: Option<Vec3>,
+    pub(crate) material: SoftBodyMaterial,
+    pub(crate) positions: Vec<Vec3>,
+    pub(crate) previous_positions: Vec<Vec3>,
+    pub(crate) velocities: Vec<Vec3>,
+    pub(crate) motion_tracked: bool,
+    pub(crate) met_soft_bodies: bool,
+    pub(crate) sane_centre: Option<Vec3>,
     /// Per edge: the rest length and plastic strain (plasticity's state).
-    spring_rest: Vec<f32>,
-    plastic_strain: Vec<f32>,
+    pub(crate) spring_rest: Vec<f32>,
+    pub(crate) plastic_strain: Vec<f32>,
     /// Per particle: where static friction holds it on a static collider.
-    friction_anchors: Vec<Option<Vec3>>,
+    pub(crate) friction_anchors: Vec<Option<Vec3>>,
     /// Per particle: the last contact pass's depth and friction in a static collider.
-    static_contact: Vec<[f32; 2]>,
+    pub(crate) static_contact: Vec<[f32; 2]>,
     /// Per particle: where static friction holds it on another soft body.
-    soft_anchors: Vec<SoftAnchor>,
-    soft_pass: u32,
-    sleep: SleepSnapshot,
+    pub(crate) soft_anchors: Vec<SoftAnchor>,
+    pub(crate) soft_pass: u32,
+    pub(crate) sleep: SleepSnapshot,
 }
 
 /// A body's sleep in a snapshot (`sleep.rs`); its settings are the game's.
@@ -148,15 +147,16 @@ impl StateSnapshot {
         &self.velocities
     }
 
-    /// Everything [`SoftBodyState::restore`] checks before it changes anything.
-    fn check(&self, body: &SoftBodyState) -> Result<(), SnapshotError> {
+    /// Everything [`SoftBodyState::restore`](super::SoftBodyState::restore) checks before it
+    /// changes anything, for a body of `mesh` with `edges` springs.
+    pub(crate) fn check(&self, mesh: &TetMesh, edges: usize) -> Result<(), SnapshotError> {
         if self.version != SNAPSHOT_VERSION {
             return Err(SnapshotError::Version {
                 found: self.version,
                 expected: SNAPSHOT_VERSION,
             });
         }
-        let expected = MeshFingerprint::of(&body.mesh);
+        let expected = MeshFingerprint::of(mesh);
         if self.mesh != expected {
             return Err(SnapshotError::OtherMesh {
                 found: self.mesh,
@@ -165,7 +165,7 @@ impl StateSnapshot {
         }
         self.material.validate()?;
         let damaged = |what: &str| Err(SnapshotError::Damaged(what.to_string()));
-        let (n, edges) = (body.positions.len(), body.springs.rest.len());
+        let n = mesh.vertex_count();
         let per_particle = [
             self.positions.len(),
             self.previous_positions.len(),
@@ -202,66 +202,6 @@ impl StateSnapshot {
         if sleep.asleep && sleep.bounds.is_none() {
             return damaged("asleep without bounds");
         }
-        Ok(())
-    }
-}
-
-impl SoftBodyState {
-    /// The body's state now, to restore later into this body or another made of the same mesh
-    /// (see `snapshot.rs`).
-    pub fn snapshot(&self) -> StateSnapshot {
-        StateSnapshot {
-            version: SNAPSHOT_VERSION,
-            mesh: MeshFingerprint::of(&self.mesh),
-            material: self.material,
-            positions: self.positions.clone(),
-            previous_positions: self.previous_positions.clone(),
-            velocities: self.velocities.clone(),
-            motion_tracked: self.motion_tracked,
-            met_soft_bodies: self.met_soft_bodies,
-            sane_centre: self.sane_centre,
-            spring_rest: self.springs.rest.clone(),
-            plastic_strain: self.springs.plastic_strain.clone(),
-            friction_anchors: (self.contacts.anchors.iter())
-                .map(|a| a.is_finite().then_some(*a))
-                .collect(),
-            static_contact: self.contacts.static_contact.clone(),
-            soft_anchors: self.scratch.soft_anchors.clone(),
-            soft_pass: self.scratch.soft_pass,
-            sleep: self.sleep.snapshot(),
-        }
-    }
-
-    /// Puts the body back in the state `snapshot` holds. The snapshot must be of this body's
-    /// mesh and of this build's [`SNAPSHOT_VERSION`]; anything that does not fit is an error
-    /// and leaves the body as it was. Settings the game gives (sleep threshold, contacts,
-    /// collision filter, runaway limits) stay this body's.
-    pub fn restore(&mut self, snapshot: &StateSnapshot) -> Result<(), SnapshotError> {
-        snapshot.check(self)?;
-        let s = snapshot;
-        self.set_material(s.material)?;
-        self.positions.copy_from_slice(&s.positions);
-        self.previous_positions
-            .copy_from_slice(&s.previous_positions);
-        self.velocities.copy_from_slice(&s.velocities);
-        self.motion_tracked = s.motion_tracked;
-        self.met_soft_bodies = s.met_soft_bodies;
-        self.sane_centre = s.sane_centre;
-        self.springs.rest.copy_from_slice(&s.spring_rest);
-        self.springs
-            .plastic_strain
-            .copy_from_slice(&s.plastic_strain);
-        for (a, s) in self.contacts.anchors.iter_mut().zip(&s.friction_anchors) {
-            *a = s.unwrap_or(Vec3::NAN);
-        }
-        self.contacts
-            .static_contact
-            .copy_from_slice(&s.static_contact);
-        self.scratch.soft_anchors.copy_from_slice(&s.soft_anchors);
-        self.scratch.soft_pass = s.soft_pass;
-        self.sleep.restore(&s.sleep);
-        self.clear_kinematic();
-        self.runaway = None;
         Ok(())
     }
 }

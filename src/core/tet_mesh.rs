@@ -209,6 +209,13 @@ impl TetMesh {
         Ok(mesh)
     }
 
+    /// This mesh with every rest position multiplied by `scale` (a spawn transform's scale
+    /// baked into the rest shape), or the error that makes that impossible (a zero scale).
+    pub fn scaled(&self, scale: Vec3) -> Result<TetMesh, TetMeshError> {
+        let positions = self.positions.iter().map(|&p| p * scale).collect();
+        TetMesh::new(positions, self.tets.clone())
+    }
+
     /// Rest positions of the vertices.
     pub fn positions(&self) -> &[Vec3] {
         &self.positions

@@ -20,7 +20,7 @@ use crate::components::{
 use crate::core::substep::{spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
     BodyPoint, ColliderInstance, CollisionFilter, Parallel, RigidBodyMotion, RigidSphereState,
-    Serial, SoftBodyState, TetMesh,
+    Serial, SoftBodyState,
 };
 use crate::core::{Stage, SubstepStage};
 
@@ -32,7 +32,7 @@ mod timing;
 use groups::*;
 pub use systems::SolverSpheres;
 use systems::*;
-pub(crate) use systems::{gather_spheres, report, scaled_mesh};
+pub(crate) use systems::{gather_spheres, report};
 #[cfg(test)]
 pub(crate) use threads::test_compute_pool;
 use threads::*;

@@ -3,17 +3,6 @@
 
 use super::*;
 
-/// The body's rest mesh scaled by `scale`, or the error that makes that impossible.
-pub(crate) fn scaled_mesh(
-    mesh: &TetMesh,
-    scale: Vec3,
-) -> Result<TetMesh, crate::core::TetMeshError> {
-    TetMesh::new(
-        mesh.positions().iter().map(|&p| p * scale).collect(),
-        mesh.tets().to_vec(),
-    )
-}
-
 /// A body with its transform and its optional pinned and driven particles.
 pub(super) type PreparedBody<'a> = (
     Entity,
@@ -49,7 +38,10 @@ pub(super) fn prepare(
             }
             let placement = *transform;
             if placement.scale != Vec3::ONE {
-                match scaled_mesh(body.state.mesh(), placement.scale)
+                match body
+                    .state
+                    .mesh()
+                    .scaled(placement.scale)
                     .map_err(|e| e.to_string())
                     .and_then(|m| {
                         SoftBodyState::new(m.into(), *body.state.material())
@@ -198,23 +190,27 @@ pub(super) fn apply_external(
     for (mut body, forces, grab) in &mut bodies {
         let state = &mut body.state;
         for e in read.iter() {
-            state.apply_radial_impulse(e.centre, e.radius, e.impulse);
+            state
+                .forces()
+                .apply_radial_impulse(e.centre, e.radius, e.impulse);
         }
         if let Some(mut grab) = grab {
             if grab.held.is_empty() {
                 let radius = grab.radius.unwrap_or(0.1 * state.rest_extent);
-                let held = state.grab_patch(grab.point, radius);
+                let held = state.forces().grab_patch(grab.point, radius);
                 if !held.is_empty() {
-                    grab.offset = grab.point - state.patch_motion(&held).0;
+                    grab.offset = grab.point - state.forces().patch_motion(&held).0;
                 }
                 grab.held = held;
             }
             let (target, spring) = (grab.target - grab.offset, [grab.stiffness, grab.damping]);
-            state.pull_patch(&grab.held, target, spring, grab.max_force, h);
+            state
+                .forces()
+                .pull_patch(&grab.held, target, spring, grab.max_force, h);
         }
         let Some(mut forces) = forces else { continue };
         if forces.force != Vec3::ZERO {
-            state.apply_impulse(h * forces.force);
+            state.forces().apply_impulse(h * forces.force);
         }
         if forces.at_points.iter().any(|f| f.bound.is_none()) {
             for f in &mut forces.at_points {
@@ -227,7 +223,7 @@ pub(super) fn apply_external(
             if let Some(p) = bind(state, f.bound, f.point)
                 && f.force != Vec3::ZERO
             {
-                state.apply_impulse_at(p, h * f.force);
+                state.forces().apply_impulse_at(p, h * f.force);
             }
         }
     }

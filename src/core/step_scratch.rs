@@ -1,0 +1,81 @@
+//! A step's working memory, kept in the body so that a step allocates nothing.
+
+use glam::Vec3;
+
+use super::chunks::ChunkFindings;
+use super::deviatoric::{ShapeBundle, shape_bundles};
+use super::lanes::Point4;
+use super::parallel::BlockFlags;
+use super::soft_records::{SoftAnchor, SoftReaction, SoftSupport};
+use super::substep_plan::{SubstepClock, SubstepPlan};
+use super::tet_mesh::TetMesh;
+
+/// A step's working memory, and what a step keeps from the last only to save work (clamp
+/// bounds, the guess of which rings need correcting, the shape model's bundles): none of it is
+/// the body's physical state; what it carries between steps decides how much work a step does,
+/// not what it computes (the tests hold every shortcut to the plain passes). Kept in the body
+/// so that a step allocates nothing.
+#[derive(Clone, Debug)]
+pub(crate) struct StepScratch {
+    /// Per-particle scratch: forces in `apply_forces`, impulse directions in the volume
+    /// passes. Kept zero between uses so that the passes never clear the whole array.
+    pub(crate) per_particle: Vec<Vec3>,
+    /// Predicted positions `x + h v` during the volume passes, kept in step with every velocity
+    /// change there (`apply_velocity_change`), so the passes read one array, not two.
+    /// Four numbers each, so that four are gathered into SIMD lanes with a load each.
+    pub(crate) predicted: Vec<Point4>,
+    /// One per block and phase: whether its job in the running pass is done.
+    pub(crate) block_done: BlockFlags,
+    /// Sphere positions saved during a substep's contacts (reused, so steps do not allocate).
+    pub(crate) sphere_positions: Vec<Vec3>,
+    /// One per chunk of particles: what each job of the contacts and the integration found.
+    pub(crate) chunk_findings: Vec<ChunkFindings>,
+    /// Velocities before a substep's volume impulses (see `substep.rs`).
+    pub(crate) substep_velocities: Vec<Vec3>,
+    /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
+    pub(crate) shape_bundles: Vec<ShapeBundle>,
+    /// This step's substeps, from their plan to the step's finish (`substep.rs`).
+    pub(crate) substep_plan: Option<SubstepPlan>,
+    /// The time spent in each stage of the substeps, when the plugin times them.
+    pub(crate) substep_clock: SubstepClock,
+    /// The particles the last soft-contact pass touched and their normals (`soft_contacts.rs`).
+    pub(crate) soft_touched: Vec<(u32, Vec3)>,
+    /// This substep's soft contacts of this body's particles (`soft_contacts.rs`).
+    pub(crate) soft_supports: Vec<SoftSupport>,
+    /// What this body's volume impulses handed to other bodies this substep.
+    pub(crate) soft_reactions: Vec<SoftReaction>,
+    /// Per particle, where static friction holds it on another body (`soft_contacts.rs`).
+    pub(crate) soft_anchors: Vec<SoftAnchor>,
+    /// The number of substep soft-contact passes so far: which anchors are current.
+    pub(crate) soft_pass: u32,
+    /// Per particle, the velocity the volume impulses' pushes into another soft body lost to
+    /// `constrain_direction` in this substep: what is handed to that body.
+    pub(crate) soft_removed: Vec<Vec3>,
+    /// The soft contacts of this body's particles since the count was last taken.
+    pub(crate) soft_count: u32,
+}
+
+impl StepScratch {
+    /// The working memory of a body of `mesh`.
+    pub(crate) fn for_mesh(mesh: &TetMesh) -> Self {
+        let n = mesh.vertex_count();
+        StepScratch {
+            per_particle: vec![Vec3::ZERO; n],
+            predicted: vec![Point4::default(); n],
+            block_done: BlockFlags::new(2 * mesh.blocks().count()),
+            sphere_positions: Vec::new(),
+            chunk_findings: ChunkFindings::for_particles(n),
+            substep_plan: None,
+            substep_clock: SubstepClock::default(),
+            soft_touched: Vec::new(),
+            soft_supports: Vec::new(),
+            soft_reactions: Vec::new(),
+            soft_anchors: vec![SoftAnchor::NONE; n],
+            soft_pass: 1,
+            soft_removed: vec![Vec3::ZERO; n],
+            soft_count: 0,
+            substep_velocities: vec![Vec3::ZERO; n],
+            shape_bundles: shape_bundles(mesh),
+        }
+    }
+}
