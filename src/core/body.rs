@@ -21,6 +21,7 @@ use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
 use super::sleep::{Sleep, SleepSettings};
 use super::snapshot::{MeshFingerprint, SNAPSHOT_VERSION, SnapshotError, StateSnapshot};
 use super::step_scratch::StepScratch;
+use super::tearing::{Tear, TearSettings};
 use super::tet_mesh::TetMesh;
 
 /// A particle index that does not exist in the body's mesh.
@@ -102,6 +103,14 @@ pub struct SoftBodyState {
     pub(crate) boundary: Boundary,
     /// What the volume passes keep between passes and steps (`impulses/`).
     pub(crate) volume_passes: VolumePassScratch,
+    /// When it tears (`tearing.rs`); `None`: never.
+    pub(crate) tearing: Option<TearSettings>,
+    /// Where it tore in the last step.
+    pub(crate) tears: Vec<Tear>,
+    /// The faces cracked but not yet come apart, as pairs of tets, and the time since the
+    /// body last came apart (`tearing.rs`).
+    pub(crate) cracks: Vec<[u32; 2]>,
+    pub(crate) since_tear: f32,
     /// A step's working memory and the caches that only save it work (see [`StepScratch`]).
     pub(crate) scratch: StepScratch,
 }
@@ -143,6 +152,10 @@ impl SoftBodyState {
                 (hi - lo).length()
             },
             volume_passes: VolumePassScratch::for_mesh(&mesh),
+            tearing: None,
+            tears: Vec::new(),
+            cracks: Vec::new(),
+            since_tear: f32::INFINITY,
             scratch: StepScratch::for_mesh(&mesh),
             mesh,
         };
@@ -262,8 +275,9 @@ impl SoftBodyState {
         self.kinematic.iter().map(|&(i, x)| (i as usize, x))
     }
 
-    /// Frees every particle made kinematic for the last step.
-    pub(crate) fn clear_kinematic(&mut self) {
+    /// Frees every particle made kinematic for the last step (the plugin does so before each
+    /// step; a game stepping the core does so before setting the next step's targets).
+    pub fn clear_kinematic(&mut self) {
         for &(i, _) in &self.kinematic {
             self.inv_masses[i as usize] = 1.0 / self.masses[i as usize];
         }
@@ -369,6 +383,16 @@ impl SoftBodyState {
     #[cfg(test)]
     pub(crate) fn refresh_predicted(&mut self, h: f32) {
         self.pass_body().refresh_predicted(h);
+    }
+
+    /// When the body tears (see [`TearSettings`]); `None` (the default): never.
+    pub fn set_tearing(&mut self, settings: Option<TearSettings>) {
+        self.tearing = settings;
+    }
+
+    /// Where the body tore in its last step (see `tearing.rs`).
+    pub fn tears(&self) -> &[Tear] {
+        &self.tears
     }
 
     /// The particles lent for the game's impulses, forces and grabs (see [`BodyForces`]).

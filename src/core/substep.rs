@@ -33,6 +33,9 @@
 //!    far as it adds no energy, friction for what the supports pushed back; for the paper's
 //!    springs a contact pass first (undoing what the volume impulses pushed into a collider).
 
+use std::collections::HashMap;
+use std::sync::Arc;
+
 use glam::Vec3;
 
 use super::body::SoftBodyState;
@@ -44,6 +47,7 @@ use super::material::{Elasticity, VolumeMethod};
 use super::parallel::{Parallel, Serial};
 use super::soft_records::{hand_soft_pushes, take_soft_pushes};
 use super::substep_plan::SubstepPlan;
+use super::tearing::{largest_strain, tear_mesh};
 use super::xpbd::{EdgeConstraints, project_edges, project_volumes};
 
 /// A stage of a step, in the order [`Stage::ORDER`]; see the module's documentation.
@@ -171,6 +175,59 @@ impl SoftBodyState {
             self.update_sleep(h, spheres, colliders);
         }
         self.catch_runaway();
+        self.tear_where_stretched(h);
+    }
+
+    /// Splits the particles that edges stretched past the material's limit pull apart
+    /// (`tearing.rs`): the body is built anew on the torn mesh, every particle's state carried
+    /// over from the particle it came from. Allocates only when something tears.
+    pub(crate) fn tear_where_stretched(&mut self, h: f32) {
+        self.tears.clear();
+        let Some(settings) = self.tearing else { return };
+        self.since_tear += h;
+        let (mesh, rest) = (&self.mesh, &self.springs.rest);
+        let strain = largest_strain(mesh, &self.positions, rest);
+        if strain.partial_cmp(&settings.max_strain) != Some(std::cmp::Ordering::Greater) {
+            return;
+        }
+        let (cracks, new_crack) = (&mut self.cracks, self.since_tear >= settings.min_interval);
+        let torn = tear_mesh(mesh, &self.positions, rest, cracks, settings, new_crack);
+        let Ok(Some(torn)) = torn else { return };
+        let Ok(mut body) = SoftBodyState::new(Arc::new(torn.mesh), self.material) else {
+            return;
+        };
+        let from = |i: usize| torn.origin[i] as usize;
+        for i in 0..body.positions.len() {
+            body.positions[i] = self.positions[from(i)];
+            body.previous_positions[i] = self.previous_positions[from(i)];
+            body.velocities[i] = self.velocities[from(i)];
+            body.contacts.anchors[i] = self.contacts.anchors[from(i)];
+        }
+        // The springs of edges that were edges before keep their plastic rest lengths.
+        let key = |[a, b]: [u32; 2]| [a.min(b), a.max(b)];
+        let old: HashMap<[u32; 2], usize> = (self.mesh.edges().iter().enumerate())
+            .map(|(k, &e)| (key(e), k))
+            .collect();
+        for (k, &[a, b]) in body.mesh.edges().iter().enumerate() {
+            if let Some(&was) = old.get(&key([from(a as usize) as u32, from(b as usize) as u32])) {
+                body.springs.rest[k] = self.springs.rest[was];
+                body.springs.plastic_strain[k] = self.springs.plastic_strain[was];
+            }
+        }
+        body.sleep.settings = self.sleep.settings;
+        (body.soft_contacts, body.collision_filter) = (self.soft_contacts, self.collision_filter);
+        (body.runaway_limits, body.tearing) = (self.runaway_limits, self.tearing);
+        (body.motion_tracked, body.sane_centre) = (self.motion_tracked, self.sane_centre);
+        body.met_soft_bodies = self.met_soft_bodies;
+        body.scratch.substep_clock = self.scratch.substep_clock;
+        body.rigid = std::mem::take(&mut self.rigid);
+        for &(i, target) in &self.kinematic {
+            let _ = body.set_kinematic(i as usize, target);
+        }
+        body.tears = torn.tears;
+        body.cracks = std::mem::take(&mut self.cracks);
+        body.since_tear = 0.0;
+        *self = body;
     }
 
     /// Sets up this step's substeps (`substeps` of them if given, for a body in substeps,

@@ -1,0 +1,114 @@
+//! Tearing (`TearSettings`): a jelly bar pulled from both ends past its limit splits into two
+//! pieces, each keeping its volume, sharing no particle, with no surface triangle across the
+//! cut; a body that may tear but is not stretched that far does not.
+
+use std::sync::Arc;
+
+use bevy_soft_body::core::{
+    SoftBodyMaterial, SoftBodyState, TearSettings, TetMesh, box_grid, pieces,
+};
+use glam::{UVec3, Vec3};
+
+/// A 0.6 m jelly bar along x, 0.1 m thick.
+fn bar() -> SoftBodyState {
+    let mesh = box_grid(UVec3::new(12, 2, 2), Vec3::splat(0.05), Vec3::ZERO).unwrap();
+    let mut body = SoftBodyState::new(Arc::new(mesh), SoftBodyMaterial::JELLY).unwrap();
+    body.set_tearing(Some(TearSettings::default()));
+    body
+}
+
+/// Steps `body` at 60 Hz without gravity for `steps` steps, the material within 0.12 m of
+/// its end faces' middles grabbed (`pull_patch`, 400 N/m) and pulled apart along x at
+/// `speed` m/s each for the first `pulled` steps. Returns the largest volume error of any
+/// piece, in percent, over the steps after the first tear.
+fn pull(body: &mut SoftBodyState, steps: usize, pulled: usize, speed: f32) -> f64 {
+    let h = 1.0 / 60.0;
+    let ends = [Vec3::new(0.0, 0.05, 0.05), Vec3::new(0.6, 0.05, 0.05)];
+    let patches = ends.map(|p| body.forces().grab_patch(p, 0.12));
+    let mut worst = 0.0f64;
+    let mut torn = false;
+    for step in 1..=steps {
+        for (k, patch) in patches.iter().enumerate().filter(|_| step <= pulled) {
+            let side = if k == 0 { -1.0 } else { 1.0 };
+            let target = ends[k] + Vec3::X * (side * speed * h * step as f32);
+            body.forces()
+                .pull_patch(patch, target, [400.0, 40.0], f32::INFINITY, h);
+        }
+        body.step_free(h, Vec3::ZERO);
+        torn |= !body.tears().is_empty();
+        if torn {
+            let (errors, _) = piece_volumes(body);
+            worst = errors.iter().fold(worst, |w, e| w.max(e.abs()));
+        }
+    }
+    worst
+}
+
+/// Per piece: its volume error in percent (signed volume of its tets against their rest
+/// volumes), and the piece of each particle (`None` for one in no tet).
+fn piece_volumes(body: &SoftBodyState) -> (Vec<f64>, Vec<Option<u32>>) {
+    let mesh: &TetMesh = body.mesh();
+    let labels = pieces(mesh);
+    let count = labels.iter().max().map_or(0, |&m| m as usize + 1);
+    let (mut volume, mut rest) = (vec![0.0f64; count], vec![0.0f64; count]);
+    let mut owner: Vec<Option<u32>> = vec![None; mesh.vertex_count()];
+    let signed = |x: [glam::DVec3; 4]| (x[1] - x[0]).dot((x[2] - x[0]).cross(x[3] - x[0])) / 6.0;
+    for (tet, &piece) in mesh.tets().iter().zip(&labels) {
+        let x = tet.map(|i| body.positions()[i as usize].as_dvec3());
+        let x0 = tet.map(|i| mesh.positions()[i as usize].as_dvec3());
+        volume[piece as usize] += signed(x);
+        rest[piece as usize] += signed(x0);
+        for &i in tet {
+            let was = owner[i as usize].replace(piece);
+            assert!(was.is_none_or(|w| w == piece), "particle {i} in two pieces");
+        }
+    }
+    let errors = volume
+        .iter()
+        .zip(&rest)
+        .map(|(v, r)| 100.0 * (v - r) / r)
+        .collect();
+    (errors, owner)
+}
+
+#[test]
+fn a_bar_pulled_past_its_limit_tears_in_two_pieces_that_keep_their_volume() {
+    let mut body = bar();
+    let particles = body.positions().len();
+    // 1 m/s each way for 1 s: the bar would be stretched to more than four times its length.
+    let worst = pull(&mut body, 120, 60, 1.0);
+    assert!(body.positions().len() > particles, "nothing tore");
+    let (errors, owner) = piece_volumes(&body);
+    assert_eq!(errors.len(), 2, "{} pieces", errors.len());
+    // The two ends are in different pieces.
+    let rest = body.mesh().positions();
+    let end = |x: f32| {
+        let i = (0..rest.len())
+            .find(|&i| (rest[i].x - x).abs() < 1e-4)
+            .unwrap();
+        owner[i].unwrap()
+    };
+    assert_ne!(end(0.0), end(0.6), "the ends are still joined");
+    // Each piece kept its volume from the tear on.
+    assert!(worst < 1.0, "a piece's volume error reached {worst} %");
+    // The surface: every boundary triangle within one piece.
+    for t in body.boundary().triangles() {
+        let p = t.map(|i| owner[i as usize].unwrap());
+        assert!(
+            p[0] == p[1] && p[1] == p[2],
+            "triangle {t:?} spans pieces {p:?}"
+        );
+    }
+    assert!(body.velocities().iter().all(|v| v.is_finite()));
+}
+
+#[test]
+fn a_bar_stretched_within_its_limit_does_not_tear() {
+    let mut body = bar();
+    let particles = body.positions().len();
+    // 0.1 m/s each way for 1 s: 0.2 m longer at most.
+    pull(&mut body, 60, 60, 0.1);
+    assert_eq!(body.positions().len(), particles);
+    assert!(body.tears().is_empty());
+    assert_eq!(pieces(body.mesh()).iter().max(), Some(&0));
+}
