@@ -59,7 +59,8 @@ pub use components::{
     DrivenParticles, PinnedParticles, PointForce, RigidSphere, SoftBody, SoftBodyContacts,
     SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
     SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
-    SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, StaticCollider,
+    SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, SoftBodyTearing, SoftBodyTorn,
+    StaticCollider,
 };
 #[cfg(feature = "render")]
 pub use loading::{
@@ -121,7 +122,8 @@ pub mod prelude {
         DrivenParticles, PinnedParticles, PointForce, RigidSphere, SoftBody, SoftBodyContacts,
         SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
         SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
-        SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, StaticCollider,
+        SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, SoftBodyTearing, SoftBodyTorn,
+        StaticCollider,
     };
     pub use crate::core::{
         ElasticSettings, Elasticity, ImpulseSettings, Plasticity, SnapshotError, SoftBodyMaterial,

@@ -17,13 +17,15 @@
 //!
 //! [`RenderAssetUsages::MAIN_WORLD`]: bevy::asset::RenderAssetUsages::MAIN_WORLD
 
+use std::sync::Arc;
+
 use bevy::camera::primitives::Aabb;
 use bevy::camera::visibility::VisibilitySystems;
 use bevy::mesh::VertexAttributeValues;
 use bevy::prelude::*;
 
 use crate::components::{SoftBody, SoftBodyError, SoftBodyErrorKind};
-use crate::core::SurfaceBinding;
+use crate::core::{SurfaceBinding, TetMesh};
 use crate::plugin::SoftBodyTiming;
 
 /// Deforms the [`Mesh3d`] of its entity to follow the particles of the soft body `body`.
@@ -58,6 +60,10 @@ pub struct SoftBodySurface {
     /// The soft body entity (may be this entity).
     pub body: Entity,
     binding: Option<SurfaceBinding>,
+    /// The tet mesh it was bound to, and the one it was last drawn on: when the body tears
+    /// (`SoftBodyTearing`) the two differ, and triangles across the cut are taken out.
+    bound_to: Option<Arc<TetMesh>>,
+    drawn_on: Option<Arc<TetMesh>>,
     /// Interpolated particle positions, then surface points: reused every frame.
     particles: Vec<Vec3>,
     points: Vec<Vec3>,
@@ -71,6 +77,8 @@ impl SoftBodySurface {
         SoftBodySurface {
             body,
             binding: None,
+            bound_to: None,
+            drawn_on: None,
             particles: Vec::new(),
             points: Vec::new(),
             failed: false,
@@ -213,6 +221,14 @@ fn deform_surfaces(
             surface.binding = None;
             continue;
         }
+        let state = body.state();
+        if surface
+            .drawn_on
+            .as_ref()
+            .is_some_and(|m| !Arc::ptr_eq(m, state.mesh()))
+        {
+            cut_torn_triangles(surface, state.mesh(), &mut mesh);
+        }
         let SoftBodySurface {
             binding,
             particles,
@@ -220,7 +236,6 @@ fn deform_surfaces(
             ..
         } = surface;
         let binding = binding.as_ref().expect("bound above");
-        let state = body.state();
         for ((p, &a), &b) in particles
             .iter_mut()
             .zip(state.previous_positions())
@@ -267,7 +282,80 @@ fn bind(
     surface.points = vec![Vec3::ZERO; binding.len()];
     surface.particles = vec![Vec3::ZERO; state.positions().len()];
     surface.binding = Some(binding);
+    surface.bound_to = Some(state.mesh().clone());
+    surface.drawn_on = Some(state.mesh().clone());
     Ok(true)
+}
+
+/// After the body tore (its tet mesh is another than the one last drawn on): the particles'
+/// buffer follows their number, the triangles of `mesh` across the cut are taken out, and the
+/// faces the tear opened are drawn: three new vertices each, bound to the corners of their tet
+/// (with the mesh's other attributes copied from its first vertex).
+fn cut_torn_triangles(surface: &mut SoftBodySurface, now: &Arc<TetMesh>, mesh: &mut Mesh) {
+    surface.particles.resize(now.vertex_count(), Vec3::ZERO);
+    let previous = surface.drawn_on.replace(now.clone());
+    let (Some(binding), Some(bound), Some(previous)) =
+        (&surface.binding, &surface.bound_to, previous)
+    else {
+        return;
+    };
+    let pieces = crate::core::pieces(now);
+    let mut kept: Vec<u32> = match mesh.indices() {
+        Some(indices) => {
+            let all: Vec<u32> = indices.iter().map(|i| i as u32).collect();
+            (all.chunks_exact(3))
+                .filter(|t| !binding.spans_cut(bound, now, &pieces, [t[0], t[1], t[2]]))
+                .flatten()
+                .copied()
+                .collect()
+        }
+        None => return,
+    };
+    // The faces opened since the last frame: those of the torn mesh against the last drawn.
+    let opened = crate::core::cut_faces(&previous, now);
+    let Some(binding) = surface.binding.as_mut() else {
+        return;
+    };
+    let drawn = binding.len();
+    let mut added = 0u32;
+    for &(tet, corners) in &opened {
+        let already = (drawn as u32..drawn as u32 + added)
+            .step_by(3)
+            .any(|_| false);
+        let _ = already;
+        for k in corners {
+            let mut weights = [0.0; 4];
+            weights[k] = 1.0;
+            binding.push(tet, weights);
+        }
+        kept.extend([0, 1, 2].map(|j| drawn as u32 + added + j));
+        added += 3;
+    }
+    let total = binding.len();
+    surface.points.resize(total, Vec3::ZERO);
+    for (_, values) in mesh.attributes_mut() {
+        extend_attribute(values, total);
+    }
+    mesh.insert_indices(bevy::mesh::Indices::U32(kept));
+}
+
+/// Grows a vertex attribute to `len` values, copying its first (positions and normals are
+/// written each frame anyway).
+fn extend_attribute(values: &mut VertexAttributeValues, len: usize) {
+    macro_rules! grow {
+        ($($variant:ident),*) => {
+            match values {
+                $(VertexAttributeValues::$variant(v) => {
+                    let first = v.first().copied().unwrap_or_default();
+                    v.resize(len, first);
+                })*
+                _ => {}
+            }
+        };
+    }
+    grow!(
+        Float32, Float32x2, Float32x3, Float32x4, Uint32, Uint32x2, Uint32x3, Uint32x4
+    );
 }
 
 /// Writes `points` (in the world) as `mesh`'s vertices in the frame `to_local`, with fresh

@@ -5,7 +5,7 @@ use std::time::Duration;
 
 use bevy::prelude::*;
 
-use super::SoftBodyStats;
+use super::{SoftBodyGrab, SoftBodyStats};
 use crate::core::{
     MaterialError, SnapshotError, SoftBodyMaterial, SoftBodyState, StateSnapshot, TetMesh,
 };
@@ -139,6 +139,28 @@ impl SoftBody {
         };
         self.state.forces().apply_impulse_at(at, impulse);
         true
+    }
+
+    /// Applies `grab`'s spring for a step of `h` seconds now (what the plugin does each step
+    /// for the [`SoftBodyGrab`] component; a game holding a body with more hands than one
+    /// applies the others so, before the step). Binds the grab to the material around its
+    /// point on first use.
+    pub fn pull(&mut self, grab: &mut SoftBodyGrab, h: f32) {
+        let state = &mut self.state;
+        if grab.held.is_empty() {
+            let radius = grab.radius.unwrap_or(0.1 * state.rest_extent);
+            let held = state.forces().grab_patch(grab.point, radius);
+            if !held.is_empty() {
+                grab.offset = grab.point - state.forces().patch_motion(&held).0;
+            }
+            grab.held = held;
+        }
+        // Particles the grab held may have been split by a tear: their indices stay valid.
+        let target = grab.target - grab.offset;
+        let spring = [grab.stiffness, grab.damping];
+        state
+            .forces()
+            .pull_patch(&grab.held, target, spring, grab.max_force, h);
     }
 
     /// The body's state now (see [`SoftBodySnapshot`]).

@@ -146,3 +146,15 @@ impl SoftBodyGrab {
         self
     }
 }
+
+/// A soft body tore in the last step (it has [`SoftBodyTearing`](super::SoftBodyTearing)):
+/// where its particles were split and how many pieces it is in now.
+#[derive(Message, Clone, Debug, PartialEq)]
+pub struct SoftBodyTorn {
+    /// The body.
+    pub body: Entity,
+    /// Where it was split, world frame, one point per particle split.
+    pub points: Vec<Vec3>,
+    /// The pieces its tets are in now (joined through shared particles).
+    pub pieces: u32,
+}

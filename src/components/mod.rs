@@ -9,10 +9,10 @@ mod world;
 
 pub use body::{SoftBody, SoftBodySnapshot};
 pub use diagnostics::{SoftBodyError, SoftBodyErrorKind, SoftBodyStats};
-pub use external::{PointForce, SoftBodyForces, SoftBodyGrab, SoftBodyRadialImpulse};
+pub use external::{PointForce, SoftBodyForces, SoftBodyGrab, SoftBodyRadialImpulse, SoftBodyTorn};
 pub use kinematics::{DrivenParticles, PinnedParticles};
 pub use settings::{
     SoftBodyContacts, SoftBodyContactsDisabled, SoftBodyRunawayLimits, SoftBodySleepThreshold,
-    SoftBodySleepingDisabled,
+    SoftBodySleepingDisabled, SoftBodyTearing,
 };
 pub use world::{RigidSphere, SoftBodyGravity, StaticCollider};

@@ -5,7 +5,7 @@
 
 use bevy::prelude::*;
 
-use crate::core::{RunawayLimits, SleepSettings, SoftContactSettings};
+use crate::core::{RunawayLimits, SleepSettings, SoftContactSettings, TearSettings};
 
 /// How this soft body meets other soft bodies and itself. Without it (or
 /// [`SoftBodyContactsDisabled`]) a body meets the other soft bodies with a gap of a tenth of its
@@ -85,6 +85,45 @@ impl Default for SoftBodyRunawayLimits {
         SoftBodyRunawayLimits {
             max_speed,
             max_stretch,
+        }
+    }
+}
+
+/// Makes this soft body tear: where its material is stretched past `max_strain` it cracks
+/// along its tets' faces and comes apart (`core/tearing.rs`), and a
+/// [`SoftBodyTorn`](super::SoftBodyTorn) message says where. The body stays one entity however
+/// many pieces it has (each keeps its volume); a game that wants an entity a piece splits it
+/// itself. Without it a body never tears.
+#[derive(Component, Reflect, Clone, Copy, Debug, PartialEq)]
+#[reflect(Component, Default, Debug, PartialEq)]
+pub struct SoftBodyTearing {
+    /// The strain `l / l0 - 1` of an edge past which the material cracks.
+    pub max_strain: f32,
+    /// The most faces cracked in one step.
+    pub max_faces_per_step: u32,
+    /// How long, s, a body that has just come apart waits before it starts another crack.
+    pub min_interval: f32,
+}
+
+impl Default for SoftBodyTearing {
+    /// The core's defaults (`TearSettings::default`).
+    fn default() -> Self {
+        let t = TearSettings::default();
+        SoftBodyTearing {
+            max_strain: t.max_strain,
+            max_faces_per_step: t.max_faces_per_step,
+            min_interval: t.min_interval,
+        }
+    }
+}
+
+impl SoftBodyTearing {
+    /// The core's settings.
+    pub(crate) fn settings(&self) -> TearSettings {
+        TearSettings {
+            max_strain: self.max_strain,
+            max_faces_per_step: self.max_faces_per_step,
+            min_interval: self.min_interval,
         }
     }
 }

@@ -390,6 +390,11 @@ impl SoftBodyState {
         self.tearing = settings;
     }
 
+    /// When the body tears.
+    pub fn tearing(&self) -> Option<TearSettings> {
+        self.tearing
+    }
+
     /// Where the body tore in its last step (see `tearing.rs`).
     pub fn tears(&self) -> &[Tear] {
         &self.tears

@@ -196,6 +196,34 @@ impl SurfaceBinding {
         &self.tets
     }
 
+    /// Binds one more surface point: to tet `tet` with barycentric `weights`.
+    pub fn push(&mut self, tet: u32, weights: [f32; 4]) {
+        self.tets.push(tet);
+        self.weights.push(weights);
+    }
+
+    /// Whether the triangle of surface points `triangle` spans a tear of the tet mesh, bound
+    /// when the mesh was `bound` and torn into `now` (whose tets' pieces are `pieces`,
+    /// `tearing::pieces`): two of its points' tets are in different pieces, or shared a
+    /// particle in `bound` and share none in `now` (the crack runs between them). A tear keeps
+    /// tet indices, so the binding holds for both.
+    pub fn spans_cut(
+        &self,
+        bound: &TetMesh,
+        now: &TetMesh,
+        pieces: &[u32],
+        triangle: [u32; 3],
+    ) -> bool {
+        let tet = |k: usize| self.tets[triangle[k] as usize] as usize;
+        let joined = |mesh: &TetMesh, a: usize, b: usize| {
+            a == b || mesh.tets()[a].iter().any(|i| mesh.tets()[b].contains(i))
+        };
+        [(0, 1), (1, 2), (2, 0)].iter().any(|&(p, q)| {
+            let (a, b) = (tet(p), tet(q));
+            pieces[a] != pieces[b] || (joined(bound, a, b) && !joined(now, a, b))
+        })
+    }
+
     /// Each point's barycentric weights in its tet (negative outside it).
     pub fn weights(&self) -> &[[f32; 4]] {
         &self.weights

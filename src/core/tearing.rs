@@ -286,3 +286,46 @@ pub fn pieces(mesh: &TetMesh) -> Vec<u32> {
         })
         .collect()
 }
+
+/// The faces a tear opened: faces of tets that are surface in `now` (the torn mesh) and were
+/// not in `bound` (the same tets before), each as its tet and the tet's three corners (0 to 3)
+/// in outward order.
+pub fn cut_faces(bound: &TetMesh, now: &TetMesh) -> Vec<(u32, [usize; 3])> {
+    let surface = |mesh: &TetMesh| {
+        let mut count: std::collections::HashMap<[u32; 3], u32> = Default::default();
+        for tet in mesh.tets() {
+            for k in 0..4 {
+                *count.entry(face_key(tet, k)).or_insert(0) += 1;
+            }
+        }
+        count
+    };
+    let (before, after) = (surface(bound), surface(now));
+    let mut faces = Vec::new();
+    for (t, (old, new)) in bound.tets().iter().zip(now.tets()).enumerate() {
+        for k in 0..4 {
+            if after[&face_key(new, k)] == 1 && before[&face_key(old, k)] != 1 {
+                let corners = [(k + 1) % 4, (k + 2) % 4, (k + 3) % 4];
+                // Outward: away from the corner not on the face (in the rest shape).
+                let x = new.map(|i| now.positions()[i as usize]);
+                let [a, b, c] = corners.map(|j| x[j]);
+                let away = (a + b + c) / 3.0 - x[k];
+                let outward = (b - a).cross(c - a).dot(away) >= 0.0;
+                let corners = if outward {
+                    corners
+                } else {
+                    [corners[0], corners[2], corners[1]]
+                };
+                faces.push((t as u32, corners));
+            }
+        }
+    }
+    faces
+}
+
+/// Face `k` of `tet` (the one without corner `k`), its particles sorted.
+fn face_key(tet: &[u32; 4], k: usize) -> [u32; 3] {
+    let mut key = [tet[(k + 1) % 4], tet[(k + 2) % 4], tet[(k + 3) % 4]];
+    key.sort_unstable();
+    key
+}

@@ -15,7 +15,7 @@ use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
     SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
     SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
-    SoftBodySleepingDisabled, SoftBodyStats, StaticCollider,
+    SoftBodySleepingDisabled, SoftBodyStats, SoftBodyTearing, SoftBodyTorn, StaticCollider,
 };
 use crate::core::substep::{spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
@@ -147,7 +147,9 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<SoftBodyGrab>()
             .register_type::<SoftBodyRadialImpulse>()
             .add_message::<SoftBodyError>()
-            .add_message::<SoftBodyRadialImpulse>();
+            .register_type::<SoftBodyTearing>()
+            .add_message::<SoftBodyRadialImpulse>()
+            .add_message::<SoftBodyTorn>();
         if let Some(step) = self.time_step
             && self.schedule == FixedUpdate.intern()
         {

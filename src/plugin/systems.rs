@@ -141,9 +141,15 @@ pub(super) fn prepare(
 /// Applies each body's settings components (`components/settings.rs`), or the defaults where
 /// one is absent, to its state; a setting that did not change is left alone (changing the
 /// sleep settings wakes a body).
-pub(super) fn apply_settings(mut bodies: Query<(&mut SoftBody, SettingsQuery)>) {
-    for (mut body, settings) in &mut bodies {
+pub(super) fn apply_settings(
+    mut bodies: Query<(&mut SoftBody, SettingsQuery, Option<&SoftBodyTearing>)>,
+) {
+    for (mut body, settings, tearing) in &mut bodies {
         let state = &mut body.state;
+        let tearing = tearing.map(SoftBodyTearing::settings);
+        if state.tearing() != tearing {
+            state.set_tearing(tearing);
+        }
         let (contacts, sleep, runaway) = core_settings(settings, state.shortest_edge);
         if state.soft_contact_settings() != contacts {
             state.set_soft_contact_settings(contacts);
@@ -195,19 +201,9 @@ pub(super) fn apply_external(
                 .apply_radial_impulse(e.centre, e.radius, e.impulse);
         }
         if let Some(mut grab) = grab {
-            if grab.held.is_empty() {
-                let radius = grab.radius.unwrap_or(0.1 * state.rest_extent);
-                let held = state.forces().grab_patch(grab.point, radius);
-                if !held.is_empty() {
-                    grab.offset = grab.point - state.forces().patch_motion(&held).0;
-                }
-                grab.held = held;
-            }
-            let (target, spring) = (grab.target - grab.offset, [grab.stiffness, grab.damping]);
-            state
-                .forces()
-                .pull_patch(&grab.held, target, spring, grab.max_force, h);
+            body.pull(&mut grab, h);
         }
+        let state = &mut body.state;
         let Some(mut forces) = forces else { continue };
         if forces.force != Vec3::ZERO {
             state.forces().apply_impulse(h * forces.force);
@@ -436,6 +432,7 @@ pub(super) fn writeback(
     mut bodies: Query<(Entity, &SoftBody, &mut SoftBodyStats, &mut Transform)>,
     threads: Res<SoftBodyThreads>,
     mut errors: MessageWriter<SoftBodyError>,
+    mut torn: MessageWriter<SoftBodyTorn>,
 ) {
     type Written<'a> = (
         Entity,
@@ -474,6 +471,17 @@ pub(super) fn writeback(
             .par_iter_mut()
             .batching_strategy(ONE_BODY_PER_TASK)
             .for_each(write);
+    }
+    for (entity, body, _, _) in &bodies {
+        let tears = body.state.tears();
+        if !tears.is_empty() {
+            let pieces = crate::core::pieces(body.state.mesh());
+            torn.write(SoftBodyTorn {
+                body: entity,
+                points: tears.iter().map(|t| t.point).collect(),
+                pieces: pieces.iter().max().map_or(0, |&p| p + 1),
+            });
+        }
     }
     for (entity, body, mut stats, _) in &mut bodies {
         let Some(runaway) = body.state.runaway() else {
