@@ -11,7 +11,8 @@
 //! gravity, every game scene (`game_scenes`) and 16 jelly cubes of 2 560 tets dropped from
 //! 0.3 m, over their first 3 s (`jellies_16`) and over 10 s, in which they settle and fall
 //! asleep (`jellies_16_10s`), and the meshes other tools made (`GameScene::bundled`, named
-//! `MESH_PRESET`), with the paper's method and XPBD. `mean_step_ms` is the
+//! `MESH_PRESET`), and the jelly cube drop with `SoftBodyTearing` (`jelly_cube_drop_tearing`:
+//! what a body that may tear but does not costs), with the paper's method and XPBD. `mean_step_ms` is the
 //! wall-clock time of the plugin's stages per step, all bodies together
 //! (`SoftBodyStepTime`; bodies run in parallel when there are threads), so Bevy's own overhead
 //! between the stages is not in it. A scene's three methods run side by side, in turns of 50
@@ -365,6 +366,30 @@ fn main() {
                 scene
                     .spawn(&mut world.commands(), method, Vec3::ZERO)
                     .expect("the standard and bundled scenes build");
+            },
+        );
+    }
+    // The jelly cube drop again with `SoftBodyTearing` (a drop stretches it nowhere near its
+    // limit): what a body that may tear but does not costs, against `jelly_cube_drop`.
+    if wanted("jelly_cube_drop_tearing") {
+        let scene = GameScene::standard()
+            .into_iter()
+            .find(|s| s.name == "jelly_cube_drop")
+            .expect("a standard scene");
+        let steps = (scene.duration_secs * 60.0).round() as u32;
+        bench(
+            &args,
+            "jelly_cube_drop_tearing",
+            &game_methods,
+            (steps, 1, 60.0),
+            |world, method| {
+                let body = scene
+                    .spawn(&mut world.commands(), method, Vec3::ZERO)
+                    .expect("a standard scene");
+                world
+                    .commands()
+                    .entity(body)
+                    .insert(SoftBodyTearing::default());
             },
         );
     }

@@ -1,11 +1,13 @@
 //! Tearing (`TearSettings`): a jelly bar pulled from both ends past its limit splits into two
 //! pieces, each keeping its volume, sharing no particle, with no surface triangle across the
-//! cut; a body that may tear but is not stretched that far does not.
+//! cut (nor in a render surface bound to it, whose torn triangles are taken out and whose
+//! opened faces are drawn); a body that may tear but is not stretched that far does not.
 
 use std::sync::Arc;
 
 use bevy_soft_body::core::{
-    SoftBodyMaterial, SoftBodyState, TearSettings, TetMesh, box_grid, pieces,
+    SoftBodyMaterial, SoftBodyState, SurfaceBinding, TearSettings, TetMesh, box_grid, cut_faces,
+    pieces,
 };
 use glam::{UVec3, Vec3};
 
@@ -111,4 +113,52 @@ fn a_bar_stretched_within_its_limit_does_not_tear() {
     assert_eq!(body.positions().len(), particles);
     assert!(body.tears().is_empty());
     assert_eq!(pieces(body.mesh()).iter().max(), Some(&0));
+}
+
+#[test]
+fn the_surface_bound_to_a_torn_bar_has_no_triangle_across_the_cut() {
+    let mut body = bar();
+    let bound = body.mesh().clone();
+    // The bar's own boundary as a render surface, bound to its tets at rest.
+    let surface = bound.boundary_surface();
+    let mut binding = SurfaceBinding::new(&bound, &surface.positions).unwrap();
+    pull(&mut body, 120, 60, 1.0);
+    let now = body.mesh().clone();
+    let labels = pieces(&now);
+    assert_eq!(labels.iter().max(), Some(&1), "two pieces");
+    let kept: Vec<[u32; 3]> = (surface.indices.chunks_exact(3))
+        .map(|t| [t[0], t[1], t[2]])
+        .filter(|&t| !binding.spans_cut(&bound, &now, &labels, t))
+        .collect();
+    let dropped = surface.indices.len() / 3 - kept.len();
+    assert!(dropped > 0, "no triangle was across the cut");
+    // The faces the tear opened, drawn on their tets.
+    let opened = cut_faces(&bound, &now);
+    assert!(!opened.is_empty());
+    let first_new = binding.len() as u32;
+    for &(tet, corners) in &opened {
+        for k in corners {
+            let mut weights = [0.0; 4];
+            weights[k] = 1.0;
+            binding.push(tet, weights);
+        }
+    }
+    let mut points = vec![Vec3::ZERO; binding.len()];
+    binding.deform(&now, body.positions(), &mut points);
+    // Every drawn triangle lies within one piece and is no longer than the bar's cells allow.
+    let tets = binding.tets();
+    let drawn = kept
+        .iter()
+        .copied()
+        .chain((0..opened.len() as u32).map(|f| [0, 1, 2].map(|j| first_new + 3 * f + j)));
+    for t in drawn {
+        let p = t.map(|i| labels[tets[i as usize] as usize]);
+        assert!(
+            p[0] == p[1] && p[1] == p[2],
+            "triangle {t:?} in pieces {p:?}"
+        );
+        let [a, b, c] = t.map(|i| points[i as usize]);
+        let longest = a.distance(b).max(b.distance(c)).max(c.distance(a));
+        assert!(longest < 0.2, "triangle {t:?} stretched to {longest} m");
+    }
 }

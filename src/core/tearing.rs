@@ -22,8 +22,9 @@ use super::tet_mesh::{TetMesh, TetMeshError};
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct TearSettings {
-    /// The strain `l / l0 - 1` of an edge past which the particles it joins are pulled apart
-    /// (0.5: half as long again as at rest).
+    /// The strain `l / l0 - 1` of an edge past which the material cracks (1: twice as long
+    /// as at rest). Squashing stretches edges across the squash: a 0.5 m jelly cube landing
+    /// from 1 m stretches some by 0.8, so a limit under that cracks it on landing.
     pub max_strain: f32,
     /// The most faces cracked in one step: a crack runs through a body over a few steps
     /// rather than shattering it in one.
@@ -36,11 +37,11 @@ pub struct TearSettings {
 }
 
 impl Default for TearSettings {
-    /// Tears past half again its rest length, 64 faces a step at most, a tenth of a second
-    /// between cracks.
+    /// Tears past twice its rest length, 64 faces a step at most, a tenth of a second between
+    /// cracks.
     fn default() -> Self {
         TearSettings {
-            max_strain: 0.5,
+            max_strain: 1.0,
             max_faces_per_step: 64,
             min_interval: 0.1,
         }
