@@ -577,3 +577,73 @@ fn settings_components_apply_live_and_are_reflected() {
     }
     assert_eq!(runaways(&app), 1);
 }
+
+/// A platform the game moves in `FixedUpdate` before the soft bodies' step (as it should:
+/// `SoftBodySystems::Prepare` reads it), 0.5 m/s along x.
+#[derive(Component)]
+struct Platform;
+
+fn move_platform(time: Res<Time>, mut platforms: Query<&mut Transform, With<Platform>>) {
+    for mut t in &mut platforms {
+        t.translation.x += 0.5 * time.delta_secs();
+    }
+}
+
+#[test]
+fn driven_particles_follow_their_target_without_a_step_of_lag() {
+    let mut app = App::new();
+    app.add_plugins((MinimalPlugins, SoftBodyPlugin::default()))
+        .insert_resource(TimeUpdateStrategy::ManualDuration(Duration::from_millis(
+            10,
+        )))
+        .add_systems(FixedUpdate, move_platform.before(SoftBodySystems::Prepare));
+    let mesh = box_grid(UVec3::new(8, 2, 2), Vec3::splat(0.05), Vec3::ZERO).unwrap();
+    let left: Vec<u32> = (0..mesh.positions().len() as u32)
+        .filter(|&i| mesh.positions()[i as usize].x < 0.01)
+        .collect();
+    let rest: Vec<Vec3> = mesh.positions().to_vec();
+    let platform = app
+        .world_mut()
+        .spawn((Platform, Transform::from_xyz(0.0, 1.0, 0.0)))
+        .id();
+    let bar = SoftBody::new(mesh.into(), SoftBodyMaterial::JELLY).unwrap();
+    let body = app
+        .world_mut()
+        .spawn((
+            bar,
+            DrivenParticles::new(platform, left.clone()),
+            Transform::from_xyz(0.0, 1.0, 0.0),
+        ))
+        .id();
+    let _ = rest;
+    let mut last: Option<(Vec3, Vec<Vec3>)> = None;
+    for _ in 0..50 {
+        app.update();
+        if !app.world().get::<SoftBody>(body).unwrap().is_placed() {
+            continue;
+        }
+        // In each step the held particles move as the platform moved before it, not as it
+        // moved a step earlier.
+        let target = app.world().get::<Transform>(platform).unwrap().translation;
+        let state = app.world().get::<SoftBody>(body).unwrap().state();
+        let held: Vec<Vec3> = left
+            .iter()
+            .map(|&i| state.positions()[i as usize])
+            .collect();
+        if let Some((last_target, last_held)) = &last {
+            for (at, was) in held.iter().zip(last_held) {
+                let moved = *at - *was;
+                assert!((moved - (target - *last_target)).length() < 1e-5, "{moved}");
+            }
+        }
+        last = Some((target, held));
+    }
+    assert!(
+        app.world()
+            .get::<Transform>(platform)
+            .unwrap()
+            .translation
+            .x
+            > 0.2
+    );
+}

@@ -296,3 +296,63 @@ fn a_snapshot_survives_a_text_format() {
     assert_eq!(back, snapshot);
     body.restore(&back).unwrap();
 }
+
+#[test]
+fn a_torn_body_restored_into_a_body_made_anew_steps_as_the_one_never_stopped() {
+    use bevy_soft_body::core::{TearSettings, pieces};
+    let mesh: Arc<TetMesh> = box_grid(UVec3::new(12, 2, 2), Vec3::splat(0.05), Vec3::ZERO)
+        .unwrap()
+        .into();
+    let bar = || {
+        let mut body = SoftBodyState::new(mesh.clone(), SoftBodyMaterial::JELLY).unwrap();
+        body.set_tearing(Some(TearSettings::default()));
+        body
+    };
+    let h = 1.0 / 60.0;
+    // The ends held by the core's grabs and drawn apart until the bar is in two pieces.
+    let ends = [Vec3::new(0.0, 0.05, 0.05), Vec3::new(0.6, 0.05, 0.05)];
+    let mut first = bar();
+    let patches = ends.map(|p| first.forces().grab_patch(p, 0.12));
+    let pull = |body: &mut SoftBodyState, step: usize| {
+        for (k, patch) in patches.iter().enumerate() {
+            let side = if k == 0 { -1.0 } else { 1.0 };
+            let target = ends[k] + Vec3::X * (side * h * step as f32);
+            body.forces()
+                .pull_patch(patch, target, [400.0, 40.0], f32::INFINITY, h);
+        }
+        body.step_free(h, Vec3::ZERO);
+    };
+    let mut step = 0;
+    while pieces(first.mesh()).iter().max() == Some(&0) {
+        step += 1;
+        assert!(step < 200, "the bar never tore");
+        pull(&mut first, step);
+    }
+    let saved = first.snapshot();
+    let json = serde_json::to_string(&saved).unwrap();
+    let mut second = bar();
+    second
+        .restore(&serde_json::from_str(&json).unwrap())
+        .unwrap();
+    assert_eq!(second.mesh().tets(), first.mesh().tets());
+    for k in 1..=100 {
+        pull(&mut first, step + k);
+        pull(&mut second, step + k);
+    }
+    assert_eq!(first.positions(), second.positions());
+    // Into a body of another mesh (the same grid, longer cells): refused, nothing changed.
+    let other = box_grid(
+        UVec3::new(12, 2, 2),
+        Vec3::new(0.06, 0.05, 0.05),
+        Vec3::ZERO,
+    )
+    .unwrap();
+    let mut other = SoftBodyState::new(Arc::new(other), SoftBodyMaterial::JELLY).unwrap();
+    let before = other.positions().to_vec();
+    let refused = other.restore(&saved);
+    assert!(
+        matches!(refused, Err(SnapshotError::OtherMesh { .. })),
+        "{refused:?}"
+    );
+    assert_eq!(other.positions(), &before[..]);
+}

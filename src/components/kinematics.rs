@@ -26,7 +26,9 @@ pub struct PinnedParticles(pub Vec<u32>);
 
 /// Particles of the [`SoftBody`](super::SoftBody) on the same entity that follow the [`Transform`] of
 /// `target`, keeping the offset they had from it when first seen (the turned end of the
-/// twisted bar, a grabbed handle). Remove the component to release them.
+/// twisted bar, a grabbed handle). Remove the component to release them. The step reads the
+/// target in `SoftBodySystems::Prepare`: a game that moves it in `FixedUpdate` before that set
+/// has the particles follow in the same step, without a step of lag.
 ///
 /// ```
 /// use bevy::prelude::*;

@@ -19,7 +19,9 @@ use super::parallel::{Parallel, SharedSlice};
 use super::ray_cast::{SurfaceHit, ray_cast};
 use super::runaway::{BodyMotion, Runaway, RunawayLimits, put_back_at_rest};
 use super::sleep::{Sleep, SleepSettings};
-use super::snapshot::{MeshFingerprint, SNAPSHOT_VERSION, SnapshotError, StateSnapshot};
+use super::snapshot::{
+    MeshFingerprint, SNAPSHOT_VERSION, SnapshotError, StateSnapshot, TornTopology,
+};
 use super::step_scratch::StepScratch;
 use super::tearing::{Tear, TearSettings};
 use super::tet_mesh::TetMesh;
@@ -111,6 +113,8 @@ pub struct SoftBodyState {
     /// body last came apart (`tearing.rs`).
     pub(crate) cracks: Vec<[u32; 2]>,
     pub(crate) since_tear: f32,
+    /// After a tear: each particle's particle in the mesh the body was made with.
+    pub(crate) origin: Vec<u32>,
     /// A step's working memory and the caches that only save it work (see [`StepScratch`]).
     pub(crate) scratch: StepScratch,
 }
@@ -156,6 +160,7 @@ impl SoftBodyState {
             tears: Vec::new(),
             cracks: Vec::new(),
             since_tear: f32::INFINITY,
+            origin: Vec::new(),
             scratch: StepScratch::for_mesh(&mesh),
             mesh,
         };
@@ -453,6 +458,12 @@ impl SoftBodyState {
             soft_anchors: self.scratch.soft_anchors.clone(),
             soft_pass: self.scratch.soft_pass,
             sleep: self.sleep.snapshot(),
+            cracks: self.cracks.clone(),
+            since_tear: self.since_tear.is_finite().then_some(self.since_tear),
+            torn: (!self.origin.is_empty()).then(|| TornTopology {
+                tets: self.mesh.tets().to_vec(),
+                origin: self.origin.clone(),
+            }),
         }
     }
 
@@ -462,6 +473,17 @@ impl SoftBodyState {
     /// filter, runaway limits) stay this body's.
     pub fn restore(&mut self, snapshot: &StateSnapshot) -> Result<(), SnapshotError> {
         let s = snapshot;
+        if let Some(torn) = &s.torn
+            && MeshFingerprint::of(&self.mesh) != s.mesh
+        {
+            let mesh = torn.mesh(&self.mesh, s.mesh)?;
+            let mut body = SoftBodyState::new(Arc::new(mesh), s.material)?;
+            body.take_settings(self);
+            body.origin.clone_from(&torn.origin);
+            body.restore(s)?;
+            *self = body;
+            return Ok(());
+        }
         s.check(&self.mesh, self.springs.rest.len())?;
         self.set_material(s.material)?;
         self.positions.copy_from_slice(&s.positions);
@@ -483,6 +505,8 @@ impl SoftBodyState {
         self.scratch.soft_anchors.copy_from_slice(&s.soft_anchors);
         self.scratch.soft_pass = s.soft_pass;
         self.sleep.restore(&s.sleep);
+        self.cracks.clone_from(&s.cracks);
+        self.since_tear = s.since_tear.unwrap_or(f32::INFINITY);
         self.clear_kinematic();
         self.runaway = None;
         Ok(())

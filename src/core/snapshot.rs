@@ -6,6 +6,8 @@
 //! What is not in it, and why:
 //! - the tet mesh: a snapshot names its mesh by a [`MeshFingerprint`] and is restored into a
 //!   body made of the same mesh (a save file holds the level's assets apart, as a game's does);
+//!   a torn body's snapshot holds how its mesh was torn, and is restored into a body made of
+//!   the mesh it was made with;
 //! - the caches of the volume passes and the step's working memory (`StepScratch`,
 //!   `VolumePassScratch`): they decide how much work a step does, never what it computes;
 //! - what the game sets every step: kinematic particles, the rigid bodies it touches, and the
@@ -91,6 +93,48 @@ pub struct StateSnapshot {
     pub(crate) soft_anchors: Vec<SoftAnchor>,
     pub(crate) soft_pass: u32,
     pub(crate) sleep: SleepSnapshot,
+    /// The faces cracked but not yet apart, and the time since the body last came apart
+    /// (`None`: never).
+    pub(crate) cracks: Vec<[u32; 2]>,
+    pub(crate) since_tear: Option<f32>,
+    /// For a body that has torn: its torn mesh, as its tets and each particle's particle in
+    /// the mesh it was made with, so that a body made anew of that mesh takes it back.
+    pub(crate) torn: Option<TornTopology>,
+}
+
+/// A torn body's mesh in a snapshot (see [`StateSnapshot`]).
+#[derive(Clone, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
+pub(crate) struct TornTopology {
+    pub(crate) tets: Vec<[u32; 4]>,
+    pub(crate) origin: Vec<u32>,
+}
+
+impl TornTopology {
+    /// The torn mesh, rebuilt from `made_with` (the mesh the body was made with); an error if
+    /// it does not fit it or is not the mesh the snapshot names.
+    pub(crate) fn mesh(
+        &self,
+        made_with: &TetMesh,
+        named: MeshFingerprint,
+    ) -> Result<TetMesh, SnapshotError> {
+        let other = || SnapshotError::OtherMesh {
+            found: named,
+            expected: MeshFingerprint::of(made_with),
+        };
+        let rest = made_with.positions();
+        if self.origin.iter().any(|&o| o as usize >= rest.len()) {
+            return Err(other());
+        }
+        let positions = self.origin.iter().map(|&o| rest[o as usize]).collect();
+        // Tets that do not make a mesh on these rest positions, or another mesh than the one
+        // named: the body was made of another mesh (or the file is damaged).
+        let mesh = TetMesh::new(positions, self.tets.clone()).map_err(|_| other())?;
+        if MeshFingerprint::of(&mesh) != named {
+            return Err(other());
+        }
+        Ok(mesh)
+    }
 }
 
 /// A body's sleep in a snapshot (`sleep.rs`); its settings are the game's.

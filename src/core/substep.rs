@@ -178,6 +178,15 @@ impl SoftBodyState {
         self.tear_where_stretched(h);
     }
 
+    /// The settings a game gives `other` (sleep, contacts, collision filter, runaway limits,
+    /// tearing), for this body built anew in its place.
+    pub(crate) fn take_settings(&mut self, other: &SoftBodyState) {
+        self.sleep.settings = other.sleep.settings;
+        (self.soft_contacts, self.collision_filter) = (other.soft_contacts, other.collision_filter);
+        (self.runaway_limits, self.tearing) = (other.runaway_limits, other.tearing);
+        self.scratch.substep_clock = other.scratch.substep_clock;
+    }
+
     /// Splits the particles that edges stretched past the material's limit pull apart
     /// (`tearing.rs`): the body is built anew on the torn mesh, every particle's state carried
     /// over from the particle it came from. Allocates only when something tears.
@@ -214,12 +223,17 @@ impl SoftBodyState {
                 body.springs.plastic_strain[k] = self.springs.plastic_strain[was];
             }
         }
-        body.sleep.settings = self.sleep.settings;
-        (body.soft_contacts, body.collision_filter) = (self.soft_contacts, self.collision_filter);
-        (body.runaway_limits, body.tearing) = (self.runaway_limits, self.tearing);
+        body.take_settings(self);
+        body.origin = if self.origin.is_empty() {
+            torn.origin
+        } else {
+            torn.origin
+                .iter()
+                .map(|&o| self.origin[o as usize])
+                .collect()
+        };
         (body.motion_tracked, body.sane_centre) = (self.motion_tracked, self.sane_centre);
         body.met_soft_bodies = self.met_soft_bodies;
-        body.scratch.substep_clock = self.scratch.substep_clock;
         body.rigid = std::mem::take(&mut self.rigid);
         for &(i, target) in &self.kinematic {
             let _ = body.set_kinematic(i as usize, target);
