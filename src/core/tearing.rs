@@ -23,8 +23,8 @@ use super::tet_mesh::{TetMesh, TetMeshError};
 #[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct TearSettings {
     /// The strain `l / l0 - 1` of an edge past which the material cracks (1: twice as long
-    /// as at rest). Squashing stretches edges across the squash: a 0.5 m jelly cube landing
-    /// from 1 m stretches some by 0.8, so a limit under that cracks it on landing.
+    /// as at rest). Squashing stretches edges across the squash: a limit much under 1 cracks
+    /// a soft body where it lands.
     pub max_strain: f32,
     /// The most faces cracked in one step: a crack runs through a body over a few steps
     /// rather than shattering it in one.

@@ -186,13 +186,6 @@ pub(super) fn apply_external(
     }
     read.clear();
     read.extend(explosions.read().copied());
-    let bind = |state: &SoftBodyState, bound: Option<(u32, [f32; 4])>, point: Vec3| {
-        let tets = state.mesh().tets().len();
-        match bound {
-            Some((tet, weights)) if (tet as usize) < tets => Some(BodyPoint { tet, weights }),
-            _ => state.body_point(point),
-        }
-    };
     for (mut body, forces, grab) in &mut bodies {
         let state = &mut body.state;
         for e in read.iter() {
@@ -208,18 +201,17 @@ pub(super) fn apply_external(
         if forces.force != Vec3::ZERO {
             state.forces().apply_impulse(h * forces.force);
         }
-        if forces.at_points.iter().any(|f| f.bound.is_none()) {
-            for f in &mut forces.at_points {
-                if f.bound.is_none() {
-                    f.bound = state.body_point(f.point).map(|p| (p.tet, p.weights));
-                }
+        let tets = state.mesh().tets().len();
+        // The binding is the plugin's bookkeeping, not a change the game made.
+        let at_points = &mut forces.bypass_change_detection().at_points;
+        for f in at_points.iter_mut().filter(|f| f.force != Vec3::ZERO) {
+            // Bound on first use, and again if a mesh change left it on no tet.
+            if f.bound.is_none_or(|(tet, _)| tet as usize >= tets) {
+                f.bound = state.body_point(f.point).map(|p| (p.tet, p.weights));
             }
-        }
-        for f in &forces.at_points {
-            if let Some(p) = bind(state, f.bound, f.point)
-                && f.force != Vec3::ZERO
-            {
-                state.forces().apply_impulse_at(p, h * f.force);
+            if let Some((tet, weights)) = f.bound {
+                let point = BodyPoint { tet, weights };
+                state.forces().apply_impulse_at(point, h * f.force);
             }
         }
     }
