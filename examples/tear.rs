@@ -1,7 +1,8 @@
-//! A jelly bar pulled apart: two hands (`SoftBodyGrab`) hold its ends and draw them apart
-//! until the jelly tears (`SoftBodyTearing`) and the two pieces hang from the hands, each
-//! keeping its volume; the cut faces are drawn. The message `SoftBodyTorn` is logged. R starts
-//! again.
+//! Tearing and cutting. A jelly bar pulled apart: two hands (`SoftBodyGrab`) hold its ends and
+//! draw them apart until the jelly tears (`SoftBodyTearing`) and the two pieces hang from the
+//! hands, each keeping its volume; the cut faces are drawn. Beside it a flesh block on the
+//! ground is cut by a fast thin blade (a `StaticCollider` with `SoftBodyCutter`, moved down
+//! through it at 3 m/s). The message `SoftBodyTorn` is logged. R starts again.
 
 mod common;
 
@@ -12,6 +13,7 @@ use bevy_soft_body::core::{TetMesh, box_grid};
 use bevy_soft_body::prelude::*;
 use bevy_soft_body::surface_mesh;
 use common::{ExtraHelp, Grab, OrbitCamera, SceneMember};
+use parry3d::shape::SharedShape;
 
 /// The bar's cells: 0.6 m long, 0.15 m square.
 const CELLS: UVec3 = UVec3::new(12, 3, 3);
@@ -35,7 +37,10 @@ fn main() -> AppExit {
         .add_systems(Startup, spawn_scene)
         .add_systems(PostStartup, frame_scene)
         .add_systems(Update, (common::respawn_on_reset(spawn_scene), log_tears))
-        .add_systems(FixedUpdate, move_hands.before(SoftBodySystems::Prepare));
+        .add_systems(
+            FixedUpdate,
+            (move_hands, move_blade).before(SoftBodySystems::Prepare),
+        );
     app.run()
 }
 
@@ -73,6 +78,46 @@ fn spawn_scene(
             SceneMember,
         ))
         .id();
+    // A flesh block on the ground and a blade above it.
+    let block: Arc<TetMesh> = box_grid(UVec3::new(6, 4, 4), Vec3::splat(CELL), Vec3::ZERO)
+        .expect("a box grid is a valid mesh")
+        .into();
+    let block_surface = block.boundary_surface();
+    let block = SoftBody::new(block, SoftBodyMaterial::FLESH).expect("the flesh preset is valid");
+    let block = commands
+        .spawn((
+            block,
+            SoftBodyTearing::default(),
+            Transform::from_xyz(1.0, 0.0, -0.1),
+            Name::new("flesh block"),
+            SceneMember,
+        ))
+        .id();
+    commands.entity(block).insert((
+        SoftBodySurface::new(block),
+        Mesh3d(meshes.add(surface_mesh(&block_surface))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color: Color::srgb(0.85, 0.45, 0.45),
+            perceptual_roughness: 0.5,
+            cull_mode: None,
+            ..default()
+        })),
+    ));
+    let blade = Vec3::new(0.003, 0.25, 0.3);
+    commands.spawn((
+        StaticCollider::new(SharedShape::cuboid(blade.x, blade.y, blade.z), 0.0),
+        SoftBodyCutter,
+        Blade,
+        Transform::from_xyz(1.151, 0.6, 0.0),
+        Mesh3d(meshes.add(Cuboid::from_size(2.0 * blade))),
+        MeshMaterial3d(materials.add(StandardMaterial {
+            base_color: Color::srgb(0.75, 0.77, 0.8),
+            metallic: 0.9,
+            perceptual_roughness: 0.2,
+            ..default()
+        })),
+        SceneMember,
+    ));
     // The second hand: a grab is one component a body, so it sits on a child body-less entity
     // that `move_hands` applies through the core.
     commands.spawn((
@@ -131,6 +176,22 @@ fn move_hands(
     }
 }
 
+/// The blade.
+#[derive(Component)]
+struct Blade;
+
+/// Brings the blade down through the block at 3 m/s after half a second, to below the ground's
+/// surface, then back up.
+fn move_blade(time: Res<Time>, hands: Res<Hands>, mut blades: Query<&mut Transform, With<Blade>>) {
+    let Some(started) = hands.started else { return };
+    let t = time.elapsed_secs() - started;
+    for mut blade in &mut blades {
+        let down = (3.0 * (t - 0.5)).clamp(0.0, 0.55);
+        let up = (3.0 * (t - 1.0)).clamp(0.0, 0.55);
+        blade.translation.y = 0.6 - down + up;
+    }
+}
+
 fn log_tears(mut torn: MessageReader<SoftBodyTorn>) {
     for t in torn.read() {
         info!(
@@ -144,8 +205,8 @@ fn log_tears(mut torn: MessageReader<SoftBodyTorn>) {
 
 fn frame_scene(mut camera: Query<(&mut OrbitCamera, &mut Transform)>) {
     if let Ok((mut orbit, mut transform)) = camera.single_mut() {
-        orbit.focus = Vec3::new(0.15, 0.6, 0.0);
-        orbit.distance = 2.2;
+        orbit.focus = Vec3::new(0.5, 0.45, 0.0);
+        orbit.distance = 2.9;
         orbit.pitch = 0.2;
         *transform = orbit.transform();
     }

@@ -57,10 +57,10 @@ pub mod surface;
 
 pub use components::{
     DrivenParticles, PinnedParticles, PointForce, RigidSphere, SoftBody, SoftBodyContacts,
-    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
-    SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
-    SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, SoftBodyTearing, SoftBodyTorn,
-    StaticCollider,
+    SoftBodyContactsDisabled, SoftBodyCutter, SoftBodyError, SoftBodyErrorKind, SoftBodyForces,
+    SoftBodyGrab, SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits,
+    SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats,
+    SoftBodyTearing, SoftBodyTorn, StaticCollider,
 };
 #[cfg(feature = "render")]
 pub use loading::{
@@ -120,10 +120,10 @@ pub mod prelude {
     pub use crate::SoftBodyPlugins;
     pub use crate::components::{
         DrivenParticles, PinnedParticles, PointForce, RigidSphere, SoftBody, SoftBodyContacts,
-        SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
-        SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
-        SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats, SoftBodyTearing, SoftBodyTorn,
-        StaticCollider,
+        SoftBodyContactsDisabled, SoftBodyCutter, SoftBodyError, SoftBodyErrorKind, SoftBodyForces,
+        SoftBodyGrab, SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits,
+        SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodySnapshot, SoftBodyStats,
+        SoftBodyTearing, SoftBodyTorn, StaticCollider,
     };
     pub use crate::core::{
         ElasticSettings, Elasticity, ImpulseSettings, Plasticity, SnapshotError, SoftBodyMaterial,

@@ -162,3 +162,52 @@ fn the_surface_bound_to_a_torn_bar_has_no_triangle_across_the_cut() {
         assert!(longest < 0.2, "triangle {t:?} stretched to {longest} m");
     }
 }
+
+#[test]
+fn a_blade_through_a_block_that_may_tear_cuts_it_in_two() {
+    use bevy_soft_body::core::ColliderInstance;
+    // A flesh block 0.3 m across, and a blade 2 mm thin standing across its middle.
+    let mesh = box_grid(UVec3::splat(6), Vec3::splat(0.05), Vec3::ZERO).unwrap();
+    let mut block = SoftBodyState::new(Arc::new(mesh), SoftBodyMaterial::FLESH).unwrap();
+    block.set_tearing(Some(TearSettings::default()));
+    let blade = parry3d::shape::SharedShape::cuboid(0.001, 0.5, 0.5);
+    let at = parry3d::math::Pose::from_parts(Vec3::new(0.151, 0.15, 0.15), glam::Quat::IDENTITY);
+    let mut blade = ColliderInstance::new(blade, at, 0.0);
+    // Not a cutter: it only pushes.
+    block.step_with_contacts(
+        1.0 / 60.0,
+        Vec3::ZERO,
+        &mut [],
+        &[blade.clone()],
+        &bevy_soft_body::core::Serial,
+    );
+    assert_eq!(pieces(block.mesh()).iter().max(), Some(&0));
+    blade.cuts = true;
+    block.step_with_contacts(
+        1.0 / 60.0,
+        Vec3::ZERO,
+        &mut [],
+        &[blade],
+        &bevy_soft_body::core::Serial,
+    );
+    let (errors, owner) = piece_volumes(&block);
+    assert_eq!(errors.len(), 2, "{} pieces", errors.len());
+    // The halves are the two sides of the blade.
+    let rest = block.mesh().positions();
+    for (i, p) in rest.iter().enumerate() {
+        if p.x < 0.1 || p.x > 0.2 {
+            let side = owner[i].unwrap();
+            let other = (0..rest.len())
+                .find(|&j| rest[j].x < 0.1)
+                .map(|j| owner[j].unwrap());
+            assert_eq!(side == other.unwrap(), p.x < 0.1, "particle {i} at {p}");
+        }
+    }
+    for _ in 0..60 {
+        block.step_free(1.0 / 60.0, Vec3::ZERO);
+    }
+    let (errors, _) = piece_volumes(&block);
+    for e in errors {
+        assert!(e.abs() < 1.0, "a half's volume error {e} %");
+    }
+}

@@ -15,4 +15,4 @@ pub use settings::{
     SoftBodyContacts, SoftBodyContactsDisabled, SoftBodyRunawayLimits, SoftBodySleepThreshold,
     SoftBodySleepingDisabled, SoftBodyTearing,
 };
-pub use world::{RigidSphere, SoftBodyGravity, StaticCollider};
+pub use world::{RigidSphere, SoftBodyCutter, SoftBodyGravity, StaticCollider};

@@ -59,6 +59,15 @@ impl StaticCollider {
     }
 }
 
+/// Marks a [`StaticCollider`] (a blade, a wire) that cuts the soft bodies that may tear
+/// (`SoftBodyTearing`): the faces between two of their tets whose centres lie on either side of
+/// it crack, and the body comes apart along it, as a knife parts flesh rather than pushing it
+/// aside. Move the collider's transform to slice.
+#[derive(Component, Clone, Copy, Debug, Default, Reflect)]
+#[reflect(Component)]
+#[require(StaticCollider::new(SharedShape::cuboid(0.001, 0.1, 0.1), 0.0))]
+pub struct SoftBodyCutter;
+
 /// Gravity for every soft body and rigid sphere.
 #[derive(Resource, Clone, Copy, Debug, Reflect)]
 #[reflect(Resource)]

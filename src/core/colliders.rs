@@ -28,6 +28,9 @@ pub struct ColliderInstance {
     pub(crate) plane: Option<(Vec3, f32)>,
     /// The soft bodies it meets.
     pub filter: CollisionFilter,
+    /// Whether it cuts the bodies that may tear: the faces between two of their tets whose
+    /// centres lie on either side of it crack (`tearing.rs`).
+    pub cuts: bool,
 }
 
 /// Which soft bodies a collider meets, as avian's collision layers: two interact when each
@@ -74,6 +77,7 @@ impl ColliderInstance {
             friction,
             plane,
             filter: CollisionFilter::ALL,
+            cuts: false,
         }
     }
 

@@ -47,8 +47,10 @@ use super::material::{Elasticity, VolumeMethod};
 use super::parallel::{Parallel, Serial};
 use super::soft_records::{hand_soft_pushes, take_soft_pushes};
 use super::substep_plan::SubstepPlan;
-use super::tearing::{largest_strain, tear_mesh};
+use super::tearing::{crack_crossed, largest_strain, split_particles, tear_mesh};
 use super::xpbd::{EdgeConstraints, project_edges, project_volumes};
+use parry3d::bounding_volume::BoundingVolume;
+use parry3d::query::Ray;
 
 /// A stage of a step, in the order [`Stage::ORDER`]; see the module's documentation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -175,7 +177,7 @@ impl SoftBodyState {
             self.update_sleep(h, spheres, colliders);
         }
         self.catch_runaway();
-        self.tear_where_stretched(h);
+        self.tear_where_stretched(h, colliders);
     }
 
     /// The settings a game gives `other` (sleep, contacts, collision filter, runaway limits,
@@ -190,17 +192,43 @@ impl SoftBodyState {
     /// Splits the particles that edges stretched past the material's limit pull apart
     /// (`tearing.rs`): the body is built anew on the torn mesh, every particle's state carried
     /// over from the particle it came from. Allocates only when something tears.
-    pub(crate) fn tear_where_stretched(&mut self, h: f32) {
+    pub(crate) fn tear_where_stretched(&mut self, h: f32, colliders: &[ColliderInstance]) {
         self.tears.clear();
         let Some(settings) = self.tearing else { return };
         self.since_tear += h;
         let (mesh, rest) = (&self.mesh, &self.springs.rest);
+        // Colliders that cut (`SoftBodyCutter`) and reach the body crack the faces they pass
+        // between; then the stretch's own cracks, and the particles the cracks part split.
+        let bounds = (colliders.iter().any(|c| c.cuts))
+            .then(|| self.swept_bounds(0.0))
+            .flatten();
+        let cut = bounds.and_then(|bounds| {
+            let crosses = |a: Vec3, b: Vec3| {
+                let ray = Ray::new(a, b - a);
+                colliders.iter().any(|c| {
+                    c.cuts
+                        && c.aabb.intersects(&bounds)
+                        && c.shape.intersects_ray(&c.pose, &ray, 1.0)
+                })
+            };
+            crack_crossed(mesh, &self.positions, &mut self.cracks, &crosses)
+        });
         let strain = largest_strain(mesh, &self.positions, rest);
-        if strain.partial_cmp(&settings.max_strain) != Some(std::cmp::Ordering::Greater) {
-            return;
-        }
+        let stretched =
+            strain.partial_cmp(&settings.max_strain) == Some(std::cmp::Ordering::Greater);
         let (cracks, new_crack) = (&mut self.cracks, self.since_tear >= settings.min_interval);
-        let torn = tear_mesh(mesh, &self.positions, rest, cracks, settings, new_crack);
+        let torn = match (stretched, cut) {
+            (true, _) => {
+                match tear_mesh(mesh, &self.positions, rest, cracks, settings, new_crack) {
+                    Ok(None) if cut.is_some() => {
+                        split_particles(mesh, &self.positions, cracks, cut.unwrap_or(Vec3::X))
+                    }
+                    torn => torn,
+                }
+            }
+            (false, Some(normal)) => split_particles(mesh, &self.positions, cracks, normal),
+            (false, None) => return,
+        };
         let Ok(Some(torn)) = torn else { return };
         let Ok(mut body) = SoftBodyState::new(Arc::new(torn.mesh), self.material) else {
             return;

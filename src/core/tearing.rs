@@ -155,6 +155,35 @@ pub(crate) fn tear_mesh(
     split_particles(mesh, positions, cracks, normal)
 }
 
+/// Cracks the faces between tets whose centres `crosses` separates (a blade between them),
+/// adding them to `cracks`; the direction across the last one, if any was added.
+pub(crate) fn crack_crossed(
+    mesh: &TetMesh,
+    positions: &[Vec3],
+    cracks: &mut Vec<[u32; 2]>,
+    crosses: &dyn Fn(Vec3, Vec3) -> bool,
+) -> Option<Vec3> {
+    let tets = mesh.tets();
+    let centre = |t: u32| {
+        tets[t as usize]
+            .iter()
+            .map(|&k| positions[k as usize])
+            .sum::<Vec3>()
+            / 4.0
+    };
+    let mut normal = None;
+    for t in 0..tets.len() as u32 {
+        for n in face_neighbours(mesh, t).into_iter().filter(|&n| n > t) {
+            let (a, b) = (centre(t), centre(n));
+            if crosses(a, b) && !cracks.contains(&[t, n]) {
+                cracks.push([t, n]);
+                normal = Some((b - a).normalize_or_zero());
+            }
+        }
+    }
+    normal
+}
+
 /// The tets sharing a face with tet `t`.
 fn face_neighbours(mesh: &TetMesh, t: u32) -> Vec<u32> {
     let tet = mesh.tets()[t as usize];
@@ -173,7 +202,7 @@ fn face_neighbours(mesh: &TetMesh, t: u32) -> Vec<u32> {
 
 /// Splits every particle whose tets the cracked faces part: its tets joined through faces not
 /// cracked form sets, and each set but the first takes a new copy of it.
-fn split_particles(
+pub(crate) fn split_particles(
     mesh: &TetMesh,
     positions: &[Vec3],
     cracks: &mut Vec<[u32; 2]>,

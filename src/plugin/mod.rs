@@ -13,9 +13,10 @@ use parry3d::math::Pose;
 use crate::components::settings::{SettingsQuery, core_settings};
 use crate::components::{
     DrivenParticles, PinnedParticles, RigidSphere, SoftBody, SoftBodyContacts,
-    SoftBodyContactsDisabled, SoftBodyError, SoftBodyErrorKind, SoftBodyForces, SoftBodyGrab,
-    SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits, SoftBodySleepThreshold,
-    SoftBodySleepingDisabled, SoftBodyStats, SoftBodyTearing, SoftBodyTorn, StaticCollider,
+    SoftBodyContactsDisabled, SoftBodyCutter, SoftBodyError, SoftBodyErrorKind, SoftBodyForces,
+    SoftBodyGrab, SoftBodyGravity, SoftBodyRadialImpulse, SoftBodyRunawayLimits,
+    SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodyStats, SoftBodyTearing, SoftBodyTorn,
+    StaticCollider,
 };
 use crate::core::substep::{spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
@@ -148,6 +149,7 @@ impl Plugin for SoftBodyPlugin {
             .register_type::<SoftBodyRadialImpulse>()
             .add_message::<SoftBodyError>()
             .register_type::<SoftBodyTearing>()
+            .register_type::<SoftBodyCutter>()
             .add_message::<SoftBodyRadialImpulse>()
             .add_message::<SoftBodyTorn>();
         if let Some(step) = self.time_step

@@ -258,7 +258,7 @@ pub(super) fn sphere_state(sphere: &RigidSphere, transform: &Transform) -> Rigid
 pub(crate) fn gather_spheres(
     mut solver: ResMut<SolverSpheres>,
     spheres: Query<(Entity, &RigidSphere, &Transform)>,
-    colliders: Query<(&StaticCollider, &Transform), Without<RigidSphere>>,
+    colliders: Query<(&StaticCollider, &Transform, Has<SoftBodyCutter>), Without<RigidSphere>>,
 ) {
     let solver = &mut *solver;
     solver.entities.clear();
@@ -268,13 +268,11 @@ pub(crate) fn gather_spheres(
         solver.states.push(sphere_state(sphere, transform));
     }
     solver.colliders.clear();
-    for (collider, transform) in &colliders {
+    for (collider, transform, cuts) in &colliders {
         let pose = Pose::from_parts(transform.translation, transform.rotation);
-        solver.colliders.push(ColliderInstance::new(
-            collider.shape.clone(),
-            pose,
-            collider.friction,
-        ));
+        let mut instance = ColliderInstance::new(collider.shape.clone(), pose, collider.friction);
+        instance.cuts = cuts;
+        solver.colliders.push(instance);
     }
 }
 
