@@ -165,6 +165,72 @@ fn a_stack_of_three_jellies_comes_to_rest() {
     }
 }
 
+/// Bodies resting on each other fall asleep together, as an island of rigid bodies does: the
+/// stack of three jelly slabs above, at 60 Hz on the grid and on a jittered mesh, is asleep as
+/// a whole within 8 s and stays asleep for the next second, where each body waking the others
+/// kept it awake for ever (the one that fell asleep first was woken by its neighbour with its
+/// quiet time begun anew, and so on, turn by turn).
+#[test]
+fn a_stack_of_jellies_falls_asleep_together() {
+    for style in [MeshStyle::Grid, MeshStyle::Jittered(0.3)] {
+        let hz = 60.0;
+        let mut app = app(
+            Vec3::new(0.0, -9.81, 0.0),
+            Duration::from_secs_f64(1.0 / hz),
+        );
+        app.world_mut()
+            .spawn((StaticCollider::ground(0.8), Transform::default()));
+        let order: Vec<Entity> = [
+            Vec3::new(0.0, 0.0, 0.0),
+            Vec3::new(0.01, 0.11, -0.01),
+            Vec3::new(0.0, 0.22, 0.01),
+        ]
+        .into_iter()
+        .map(|corner| {
+            app.world_mut()
+                .spawn((slab(style, corner), Transform::default()))
+                .id()
+        })
+        .collect();
+        let asleep = |app: &App| {
+            order
+                .iter()
+                .map(|&e| {
+                    app.world()
+                        .get::<SoftBody>(e)
+                        .unwrap()
+                        .state()
+                        .is_sleeping()
+                })
+                .collect::<Vec<bool>>()
+        };
+        let mut all_asleep_at = None;
+        for step in 0..(8.0 * hz) as usize {
+            app.update();
+            if asleep(&app).iter().all(|&a| a) {
+                all_asleep_at = Some(step as f64 / hz);
+                break;
+            }
+        }
+        println!("{style:?}: the stack is asleep at {all_asleep_at:?} s");
+        assert!(
+            all_asleep_at.is_some(),
+            "{style:?}: the stack is not asleep after 8 s: {:?}",
+            asleep(&app)
+        );
+        let before = bodies(&mut app, &order);
+        for _ in 0..hz as usize {
+            app.update();
+            assert!(
+                asleep(&app).iter().all(|&a| a),
+                "{style:?}: {:?}",
+                asleep(&app)
+            );
+        }
+        assert_eq!(before, bodies(&mut app, &order), "{style:?}");
+    }
+}
+
 /// Two jellies thrown at each other at 4 m/s each (off-centre, no gravity) bounce apart: they
 /// end moving away from each other, with their linear momentum kept to rounding, and no
 /// particle of one ends more than 2 mm inside the other.

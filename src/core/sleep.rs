@@ -81,6 +81,15 @@ impl Sleep {
         self.quiet_for = 0.0;
         self.bounds = None;
     }
+
+    /// Wakes the body but keeps its quiet time: for a body touched by an awake one, so that
+    /// bodies resting on each other fall asleep together, in the step the last of them has
+    /// been quiet long enough (as rigid-body engines put an island to sleep), instead of each
+    /// waking the others with a quiet time begun anew (a pile then never slept).
+    pub(crate) fn stir(&mut self) {
+        self.asleep = false;
+        self.bounds = None;
+    }
 }
 
 /// A fingerprint of the colliders whose bounds touch `bounds`: their number, shapes' addresses,

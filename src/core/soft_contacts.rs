@@ -272,12 +272,14 @@ fn resolve_pair(
     b.scratch.soft_supports = contact_b.supports.into_inner();
     record_soft_contacts(a);
     record_soft_contacts(b);
-    // A sleeping body touched by a moving one wakes; two sleeping ones stay as they are.
+    // A sleeping body touched by an awake one is stirred (it wakes, its quiet time kept: if
+    // it stays still, it sleeps again with the last of its neighbours; see `Sleep::stir`);
+    // two sleeping ones stay as they are.
     if contacts > 0 {
         if a.is_sleeping() && !b.is_sleeping() {
-            a.wake_up();
+            a.sleep.stir();
         } else if b.is_sleeping() && !a.is_sleeping() {
-            b.wake_up();
+            b.sleep.stir();
         }
     }
     contacts
