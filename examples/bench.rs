@@ -71,7 +71,7 @@ struct Cli {
     #[arg(long)]
     only: Option<String>,
     /// Only this method
-    #[arg(long, value_parser = ["baseline", "paper", "xpbd"])]
+    #[arg(long, value_parser = ["baseline", "paper", "xpbd", "clusters"])]
     method: Option<String>,
     /// XPBD's substeps
     #[arg(long, default_value_t = 10, value_parser = substeps)]
@@ -251,6 +251,11 @@ fn main() {
         VolumeMethod::Impulses(args.impulses),
         VolumeMethod::Xpbd(XpbdSettings {
             substeps: args.xpbd_substeps,
+            clusters: 0,
+        }),
+        VolumeMethod::Xpbd(XpbdSettings {
+            substeps: args.xpbd_substeps,
+            ..XpbdSettings::CLUSTERS
         }),
     ]
     .into_iter()

@@ -1,7 +1,7 @@
 //! Drops any mesh on the ground at game scale, as a game would: "try your mesh".
 //!
 //! cargo run --release --all-features --example drop -- MESH [--preset jelly] [--size 1]
-//!     [--hz 60] [--method paper|xpbd] [--tets N] [--seconds S] [--headless]
+//!     [--hz 60] [--method paper|xpbd|clusters] [--tets N] [--seconds S] [--headless]
 //!
 //! `MESH` is an OBJ file (tetrahedralized to about `N` tets, default 6000) or a TetGen mesh
 //! given by its `.node` file (the `.ele` beside it). The model is scaled so that its largest
@@ -24,8 +24,7 @@ use std::time::Duration;
 
 use bevy::prelude::*;
 use bevy_soft_body::core::{
-    Resolution, TetMesh, TriangleSurface, VolumeMethod, XpbdSettings, parse_obj, parse_tetgen,
-    tetrahedralize,
+    Resolution, TetMesh, TriangleSurface, VolumeMethod, parse_obj, parse_tetgen, tetrahedralize,
 };
 use bevy_soft_body::prelude::*;
 use clap::Parser;
@@ -52,7 +51,7 @@ struct Args {
     #[arg(long, default_value_t = 60.0, value_parser = rate)]
     hz: f32,
     /// How the volume is kept: paper (the impulses) or xpbd (10 substeps)
-    #[arg(long, default_value = "paper", value_parser = ["paper", "xpbd"])]
+    #[arg(long, default_value = "paper", value_parser = ["paper", "xpbd", "clusters"])]
     method: String,
     /// Simulated seconds, headless
     #[arg(long, default_value_t = 3.0, value_parser = seconds)]
@@ -135,7 +134,8 @@ fn material(args: &Args) -> SoftBodyMaterial {
         .find(|(name, _)| *name == args.preset)
         .map_or(SoftBodyMaterial::JELLY, |p| p.1);
     let method = match args.method.as_str() {
-        "xpbd" => VolumeMethod::Xpbd(XpbdSettings { substeps: 10 }),
+        "xpbd" => VolumeMethod::XPBD,
+        "clusters" => VolumeMethod::XPBD_CLUSTERS,
         _ => VolumeMethod::PAPER_IMPULSES,
     };
     preset.with_method(method)

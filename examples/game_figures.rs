@@ -35,7 +35,7 @@ struct Args {
     /// Step rates, Hz.
     #[arg(long, value_delimiter = ',', default_values_t = [30.0, 60.0, 120.0])]
     hz: Vec<f32>,
-    /// Methods: paper, baseline, xpbd.
+    /// Methods: paper, baseline, xpbd, clusters (XPBD with its cluster volume correction).
     #[arg(long, value_delimiter = ',', default_values_t = ["paper".to_string(), "xpbd".to_string(), "baseline".to_string()])]
     methods: Vec<String>,
     /// XPBD's substeps.
@@ -67,7 +67,13 @@ fn xpbd_match(scene: &GameScene, hz: f32) -> Result<String, String> {
         .map_err(|e| e.to_string())?;
     for substeps in MATCH_SUBSTEPS {
         let xpbd = scene
-            .run(VolumeMethod::Xpbd(XpbdSettings { substeps }), hz)
+            .run(
+                VolumeMethod::Xpbd(XpbdSettings {
+                    substeps,
+                    clusters: 0,
+                }),
+                hz,
+            )
             .map_err(|e| e.to_string())?;
         if xpbd.runaways == 0 && xpbd.peak_volume_error_pct <= paper.peak_volume_error_pct {
             let ratio = paper.mean_step_ms / xpbd.mean_step_ms;
@@ -184,6 +190,11 @@ fn main() -> Result<(), String> {
                 "baseline" => VolumeMethod::PAPER_BASELINE,
                 "xpbd" => VolumeMethod::Xpbd(XpbdSettings {
                     substeps: args.xpbd_substeps,
+                    clusters: 0,
+                }),
+                "clusters" => VolumeMethod::Xpbd(XpbdSettings {
+                    substeps: args.xpbd_substeps,
+                    ..XpbdSettings::CLUSTERS
                 }),
                 other => return Err(format!("--methods: unknown method `{other}`")),
             };

@@ -199,6 +199,7 @@ fn main() {
         VolumeMethod::Impulses(args.impulses),
         VolumeMethod::Xpbd(XpbdSettings {
             substeps: args.xpbd_substeps,
+            clusters: 0,
         }),
     ];
     let mut summary = String::from(
@@ -289,7 +290,10 @@ fn xpbd_match(scene: PaperScene, paper: &Run, verbose: bool) -> String {
     for substeps in 1..=MATCH_MAX_SUBSTEPS {
         let xpbd = run(
             scene,
-            VolumeMethod::Xpbd(XpbdSettings { substeps }),
+            VolumeMethod::Xpbd(XpbdSettings {
+                substeps,
+                clusters: 0,
+            }),
             verbose,
         );
         if xpbd.peak <= paper.peak {

@@ -186,10 +186,45 @@ fn a_stiff_body_on_an_irregular_mesh_falls_without_deforming() {
     }
 }
 
+/// XPBD with its cluster volume correction (`VolumeMethod::XPBD_CLUSTERS`), on every game
+/// scene and every mesh other tools made, at 30, 60 and 120 Hz: finite, never caught running
+/// away, and the volume within 1 % throughout; on the bundled meshes at 60 Hz, where plain XPBD at
+/// the same substeps peaks at 0.8-3.3 %, at most a quarter of plain XPBD's peak.
+#[test]
+fn xpbd_with_clusters_keeps_every_scene_under_one_percent() {
+    for scene in GameScene::standard()
+        .into_iter()
+        .chain(GameScene::bundled())
+    {
+        for hz in RATES {
+            let r = scene.run(VolumeMethod::XPBD_CLUSTERS, hz).unwrap();
+            let name = format!("{} at {hz} Hz", scene.name);
+            assert!(r.finite, "{name}: {r:?}");
+            assert_eq!(r.runaways, 0, "{name}: {r:?}");
+            assert!(r.peak_volume_error_pct < 1.0, "{name}: {r:?}");
+        }
+    }
+    for scene in GameScene::bundled() {
+        let plain = scene.run(VolumeMethod::XPBD, 60.0).unwrap();
+        let clusters = scene.run(VolumeMethod::XPBD_CLUSTERS, 60.0).unwrap();
+        assert!(
+            clusters.peak_volume_error_pct < plain.peak_volume_error_pct / 4.0,
+            "{}: {clusters:?} against {plain:?}",
+            scene.name
+        );
+    }
+}
+
 #[test]
 fn a_physical_body_conserves_momentum_in_free_flight() {
+    for method in [VolumeMethod::PAPER_IMPULSES, VolumeMethod::XPBD_CLUSTERS] {
+        conserves_momentum_in_free_flight(method);
+    }
+}
+
+fn conserves_momentum_in_free_flight(method: VolumeMethod) {
     let scene = scene("jelly_cube_drop");
-    let mut world = scene.world(VolumeMethod::PAPER_IMPULSES).unwrap();
+    let mut world = scene.world(method).unwrap();
     world.colliders.clear();
     world.gravity = Vec3::ZERO;
     // Squeezed from two sides while moving: every pass has work, nothing outside acts.
@@ -204,7 +239,8 @@ fn a_physical_body_conserves_momentum_in_free_flight() {
     let after = world.body.linear_momentum();
     assert!(
         (after - momentum).length() < 1e-3 * momentum.length(),
-        "{momentum} -> {after}"
+        "{}: {momentum} -> {after}",
+        method.name()
     );
     assert!(world.body.volume_metrics().volume_error_pct.abs() < 1.0);
 }

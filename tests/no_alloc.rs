@@ -60,6 +60,7 @@ fn steps_allocate_nothing_after_the_first() {
             VolumeMethod::PAPER_BASELINE,
             VolumeMethod::PAPER_IMPULSES,
             VolumeMethod::XPBD,
+            VolumeMethod::XPBD_CLUSTERS,
         ]
         .map(|method| (m, method))
     }) {

@@ -16,7 +16,9 @@ pub enum VolumeMethod {
     /// Extended position-based dynamics (Macklin et al. 2016, with the substeps of "Small Steps
     /// in Physics Simulation", 2019): the method most games use, as a peer to measure against.
     /// Springs become edge constraints of compliance `1 / k_D` (the same energy), each tet a
-    /// volume constraint of zero compliance; one iteration per substep.
+    /// volume constraint of zero compliance; one iteration per substep. With
+    /// [`XpbdSettings::clusters`], the body's volume is then put back region by region at the
+    /// end of each step ([`VolumeMethod::XPBD_CLUSTERS`]).
     Xpbd(XpbdSettings),
 }
 
@@ -26,6 +28,34 @@ pub enum VolumeMethod {
 pub struct XpbdSettings {
     /// Substeps per step, each with one pass over every constraint and its own contacts.
     pub substeps: u32,
+    /// About how many regions (clusters of tets, cells of a grid over the rest shape) get their
+    /// volume back exactly at the end of each step, all together (`core/clusters.rs`); 0 for
+    /// none (plain XPBD). XPBD's sweeps hold each tet but leave the body's smooth loss, which a
+    /// few large regions see: 8 puts it back (PERFORMANCE.md, "Cluster volume correction").
+    /// With clusters, `substeps` counts per 1/60 s of step (20 a step at 30 Hz, 5 at 120 Hz),
+    /// so that a game gets the same body at any rate; plain XPBD, the peer measured against,
+    /// takes `substeps` a step whatever its length.
+    pub clusters: u32,
+}
+
+impl XpbdSettings {
+    /// 10 substeps and 8 clusters ([`VolumeMethod::XPBD_CLUSTERS`]).
+    pub const CLUSTERS: XpbdSettings = XpbdSettings {
+        substeps: 10,
+        clusters: 8,
+    };
+
+    /// The substeps of a step of `h` seconds: `substeps`, or with clusters `substeps` per
+    /// 1/60 s (see [`XpbdSettings::clusters`]).
+    pub fn substeps_for(&self, h: f32) -> u32 {
+        if self.clusters == 0 {
+            return self.substeps.max(1);
+        }
+        // A hair of slack, so that 1/60 s is `substeps`, not one more.
+        ((self.substeps as f32 * h * 60.0) * (1.0 - 1e-4))
+            .ceil()
+            .clamp(1.0, 10_000.0) as u32
+    }
 }
 
 impl VolumeMethod {
@@ -36,13 +66,20 @@ impl VolumeMethod {
     /// The paper's method with every part switched on.
     pub const PAPER_IMPULSES: VolumeMethod = VolumeMethod::Impulses(ImpulseSettings::PAPER);
     /// XPBD with 10 substeps.
-    pub const XPBD: VolumeMethod = VolumeMethod::Xpbd(XpbdSettings { substeps: 10 });
+    pub const XPBD: VolumeMethod = VolumeMethod::Xpbd(XpbdSettings {
+        substeps: 10,
+        clusters: 0,
+    });
+    /// XPBD with 10 substeps and the volume of 8 clusters put back at the end of each step.
+    pub const XPBD_CLUSTERS: VolumeMethod = VolumeMethod::Xpbd(XpbdSettings::CLUSTERS);
 
-    /// A short name for tables and logs: `baseline`, `paper` or `xpbd`.
+    /// A short name for tables and logs: `baseline`, `paper`, `xpbd` or `clusters` (XPBD with
+    /// its cluster volume correction).
     pub fn name(&self) -> &'static str {
         match self {
             VolumeMethod::Baseline { .. } => "baseline",
             VolumeMethod::Impulses(_) => "paper",
+            VolumeMethod::Xpbd(s) if s.clusters > 0 => "clusters",
             VolumeMethod::Xpbd(_) => "xpbd",
         }
     }

@@ -5,6 +5,7 @@ pub(crate) mod blocks;
 pub(crate) mod body;
 pub(crate) mod boundary;
 pub(crate) mod chunks;
+pub(crate) mod clusters;
 pub(crate) mod colliders;
 pub(crate) mod contacts;
 pub(crate) mod deviatoric;

@@ -3,6 +3,7 @@
 use glam::Vec3;
 
 use super::chunks::ChunkFindings;
+use super::clusters::ClusterVolumes;
 use super::deviatoric::{ShapeBundle, shape_bundles};
 use super::lanes::Point4;
 use super::parallel::BlockFlags;
@@ -53,6 +54,9 @@ pub(crate) struct StepScratch {
     pub(crate) soft_removed: Vec<Vec3>,
     /// The soft contacts of this body's particles since the count was last taken.
     pub(crate) soft_count: u32,
+    /// The clusters of XPBD's cluster volume correction (`clusters.rs`), made at the first
+    /// step that uses them.
+    pub(crate) clusters: ClusterVolumes,
 }
 
 impl StepScratch {
@@ -74,6 +78,7 @@ impl StepScratch {
             soft_pass: 1,
             soft_removed: vec![Vec3::ZERO; n],
             soft_count: 0,
+            clusters: ClusterVolumes::default(),
             substep_velocities: vec![Vec3::ZERO; n],
             shape_bundles: shape_bundles(mesh),
         }

@@ -39,6 +39,7 @@ use std::sync::Arc;
 use glam::Vec3;
 
 use super::body::SoftBodyState;
+use super::clusters::correct_cluster_volumes;
 use super::colliders::{ColliderInstance, RigidSphereState};
 use super::deviatoric::{project_tet_shapes, refresh_shape_bundles};
 use super::forces::{ForceBody, explicit_forces};
@@ -348,7 +349,7 @@ impl SoftBodyState {
         approach: f32,
     ) -> Option<u32> {
         match (self.material.method, self.material.elasticity) {
-            (VolumeMethod::Xpbd(s), _) => Some(s.substeps.max(1)),
+            (VolumeMethod::Xpbd(s), _) => Some(s.substeps_for(h)),
             (VolumeMethod::Impulses(_), Elasticity::Elastic(e)) => {
                 let speed = self.substep_speed(h, spheres, colliders).max(approach);
                 let for_motion = e.substeps(h, speed, self.shortest_edge);
@@ -470,6 +471,20 @@ impl SoftBodyState {
             }
             SubstepStage::Advance => {
                 self.substep_advance(plan);
+                if let VolumeMethod::Xpbd(s) = self.material.method
+                    && s.clusters > 0
+                    && k + 1 == plan.substeps
+                {
+                    correct_cluster_volumes(
+                        &mut self.scratch.clusters,
+                        s.clusters,
+                        &self.mesh,
+                        &mut self.positions,
+                        &self.inv_masses,
+                        &self.contacts.normals,
+                        &self.contacts.kept,
+                    );
+                }
                 0
             }
         };

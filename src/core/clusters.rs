@@ -1,0 +1,322 @@
+//! Cluster volume correction: at the end of a step, the body's volume put back region by
+//! region, every region exactly and all of them together.
+//!
+//! XPBD's per-tet volume constraints, one Gauss-Seidel sweep a substep, hold each tet near its
+//! volume but leave the body's smooth, low-frequency loss (a sag under gravity, a landing's
+//! squash, what the contacts take back after the sweep) to later substeps that never catch up:
+//! 1-3 % on a landing at 60 Hz, more at 30. That part is what a few large regions see. The tets
+//! are grouped into clusters (the cells of a grid over the rest shape, about
+//! [`XpbdSettings::clusters`](super::material::XpbdSettings::clusters) of them); each cluster's
+//! volume `C_c = sum of its tets' (V - V0)` is a constraint with gradient
+//! `G_c = sum of its tets' volume gradients` (non-zero only on the cluster's boundary, the sums
+//! cancelling inside), and the positions move by `dx = W G^T q` with `G W G^T q = -C`: a small
+//! dense system (one row per cluster), solved by Cholesky. As with the paper's impulses
+//! (sections 4 and 5), each tet's gradients sum to zero, so `sum m dx = 0`: momentum is kept.
+//! A particle touching a collider does not move into it (the push along its contact normal is
+//! taken out of `W`, which keeps `G W G^T` symmetric).
+//!
+//! It runs once a step, after the last substep, on the positions only: the velocities keep what
+//! the substeps gave them, so the correction adds no energy (it is a projection of where the
+//! step ends, as XPBD's own constraints are). Measured against the alternatives (in every
+//! substep, on the velocities, with more clusters, the rings solved together by conjugate
+//! gradients) in PERFORMANCE.md, "Cluster volume correction".
+
+use glam::Vec3;
+
+use super::geometry::{signed_volume, volume_gradients};
+use super::tet_mesh::TetMesh;
+
+/// A body's clusters and the working memory of their correction (sized once, with the body or
+/// when the number of clusters asked for changes).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct ClusterVolumes {
+    /// The number of clusters asked for (the grid's cells are sized for it).
+    requested: u32,
+    /// The number of clusters made (the grid's cells that hold a tet's centre).
+    clusters: usize,
+    /// Per tet, its cluster.
+    tet_cluster: Vec<u32>,
+    /// Per particle, where its slots start in `slot_cluster` (one slot per cluster among its
+    /// tets), and one past the last particle's.
+    slot_starts: Vec<u32>,
+    /// Per slot, its cluster.
+    slot_cluster: Vec<u32>,
+    /// Per tet corner, its particle's slot for the tet's cluster.
+    corner_slot: Vec<[u32; 4]>,
+    /// Per cluster, its rest volume.
+    rest: Vec<f64>,
+    /// Per slot, the cluster's volume gradient at the slot's particle.
+    gradients: Vec<Vec3>,
+    /// Per cluster, its volume now.
+    volume: Vec<f64>,
+    /// `G W G^T`, row-major, then its Cholesky factor.
+    matrix: Vec<f64>,
+    /// `-C`, then the solution `q`.
+    rhs: Vec<f64>,
+}
+
+impl ClusterVolumes {
+    /// About `requested` clusters of `mesh`: cubic cells of the rest shape, each of about
+    /// `1 / requested` of its volume.
+    pub(crate) fn new(mesh: &TetMesh, requested: u32) -> ClusterVolumes {
+        let x = mesh.positions();
+        let (lo, _) = mesh.bounds();
+        let cell = (mesh.total_rest_volume() as f32 / requested.max(1) as f32)
+            .cbrt()
+            .max(f32::MIN_POSITIVE);
+        // Cells numbered in the order their first tet comes.
+        let mut cells = std::collections::HashMap::new();
+        let tet_cluster: Vec<u32> = mesh
+            .tets()
+            .iter()
+            .map(|tet| {
+                let centre = tet.iter().map(|&i| x[i as usize]).sum::<Vec3>() / 4.0;
+                let key = ((centre - lo) / cell).floor().as_ivec3();
+                let next = cells.len() as u32;
+                *cells.entry(key).or_insert(next)
+            })
+            .collect();
+        let clusters = cells.len();
+        let mut per_particle: Vec<Vec<u32>> = vec![Vec::new(); mesh.vertex_count()];
+        for (tet, &c) in mesh.tets().iter().zip(&tet_cluster) {
+            for &i in tet {
+                if !per_particle[i as usize].contains(&c) {
+                    per_particle[i as usize].push(c);
+                }
+            }
+        }
+        let mut slot_starts = Vec::with_capacity(per_particle.len() + 1);
+        let mut slot_cluster = Vec::new();
+        for list in &per_particle {
+            slot_starts.push(slot_cluster.len() as u32);
+            slot_cluster.extend_from_slice(list);
+        }
+        slot_starts.push(slot_cluster.len() as u32);
+        let corner_slot = mesh
+            .tets()
+            .iter()
+            .zip(&tet_cluster)
+            .map(|(tet, &c)| {
+                tet.map(|i| {
+                    let i = i as usize;
+                    let k = per_particle[i].iter().position(|&d| d == c).unwrap_or(0);
+                    slot_starts[i] + k as u32
+                })
+            })
+            .collect();
+        let mut rest = vec![0.0; clusters];
+        for (&c, &v0) in tet_cluster.iter().zip(mesh.rest_volumes()) {
+            rest[c as usize] += v0 as f64;
+        }
+        ClusterVolumes {
+            requested,
+            clusters,
+            tet_cluster,
+            gradients: vec![Vec3::ZERO; slot_cluster.len()],
+            slot_starts,
+            slot_cluster,
+            corner_slot,
+            rest,
+            volume: vec![0.0; clusters],
+            matrix: vec![0.0; clusters * clusters],
+            rhs: vec![0.0; clusters],
+        }
+    }
+
+    /// Moves `positions` so that every cluster has its rest volume (to first order), particles
+    /// of inverse mass `inv_masses`, those touching a collider (`normals[i]` non-zero, keeping
+    /// `kept[i]` of a push into it) not pushed into it.
+    pub(crate) fn correct(
+        &mut self,
+        mesh: &TetMesh,
+        positions: &mut [Vec3],
+        inv_masses: &[f32],
+        normals: &[Vec3],
+        kept: &[f32],
+    ) {
+        self.measure(mesh, positions);
+        self.assemble(inv_masses, normals, kept);
+        if !solve_cholesky(&mut self.matrix, &mut self.rhs, self.clusters) {
+            return;
+        }
+        for (i, x) in positions.iter_mut().enumerate() {
+            let w = inv_masses[i];
+            if w == 0.0 {
+                continue;
+            }
+            let mut push = Vec3::ZERO;
+            for s in self.slots(i) {
+                push += self.gradients[s] * self.rhs[self.slot_cluster[s] as usize] as f32;
+            }
+            let push = w * without_contact(push, normals[i], kept[i]);
+            if push.is_finite() {
+                *x += push;
+            }
+        }
+    }
+
+    /// The slots of particle `i`.
+    fn slots(&self, i: usize) -> std::ops::Range<usize> {
+        self.slot_starts[i] as usize..self.slot_starts[i + 1] as usize
+    }
+
+    /// Each cluster's volume and its gradient at each of its particles.
+    fn measure(&mut self, mesh: &TetMesh, positions: &[Vec3]) {
+        self.gradients.fill(Vec3::ZERO);
+        self.volume.fill(0.0);
+        for ((tet, &c), slots) in mesh
+            .tets()
+            .iter()
+            .zip(&self.tet_cluster)
+            .zip(&self.corner_slot)
+        {
+            let x = tet.map(|i| positions[i as usize]);
+            self.volume[c as usize] += signed_volume(&x) as f64;
+            for (g, &s) in volume_gradients(&x).into_iter().zip(slots) {
+                self.gradients[s as usize] += g;
+            }
+        }
+    }
+
+    /// `G W G^T` and `-C`. A cluster no free particle can change (all of it kinematic) gets
+    /// the row of the identity and no correction.
+    fn assemble(&mut self, inv_masses: &[f32], normals: &[Vec3], kept: &[f32]) {
+        let k = self.clusters;
+        self.matrix.fill(0.0);
+        for (i, &w) in inv_masses.iter().enumerate() {
+            if w == 0.0 {
+                continue;
+            }
+            for s in self.slots(i) {
+                let row = self.slot_cluster[s] as usize * k;
+                let weighted = w * without_contact(self.gradients[s], normals[i], kept[i]);
+                for t in self.slots(i) {
+                    let column = self.slot_cluster[t] as usize;
+                    self.matrix[row + column] += weighted.dot(self.gradients[t]) as f64;
+                }
+            }
+        }
+        let largest = (0..k).map(|c| self.matrix[c * k + c]).fold(0.0, f64::max);
+        for c in 0..k {
+            self.rhs[c] = self.rest[c] - self.volume[c];
+            if self.matrix[c * k + c] <= 1e-12 * largest {
+                for d in 0..k {
+                    self.matrix[c * k + d] = 0.0;
+                    self.matrix[d * k + c] = 0.0;
+                }
+                self.matrix[c * k + c] = 1.0;
+                self.rhs[c] = 0.0;
+            }
+        }
+    }
+}
+
+/// [`ClusterVolumes::correct`] with about `requested` clusters of `mesh`, made anew in
+/// `clusters` first if they were made for another number or another mesh (a body's first step
+/// with them, or a torn body's).
+pub(crate) fn correct_cluster_volumes(
+    clusters: &mut ClusterVolumes,
+    requested: u32,
+    mesh: &TetMesh,
+    positions: &mut [Vec3],
+    inv_masses: &[f32],
+    normals: &[Vec3],
+    kept: &[f32],
+) {
+    if clusters.requested != requested || clusters.tet_cluster.len() != mesh.tet_count() {
+        *clusters = ClusterVolumes::new(mesh, requested);
+    }
+    clusters.correct(mesh, positions, inv_masses, normals, kept);
+}
+
+/// `a` without the part along a contact's outward normal `n` that the particle does not keep
+/// (all of it against a static collider, `kept = 0`): the particle slides along what it
+/// touches.
+fn without_contact(a: Vec3, n: Vec3, kept: f32) -> Vec3 {
+    a - n * (a.dot(n) * (1.0 - kept))
+}
+
+/// Solves `m x = b` in place (`b` becomes `x`) for the symmetric positive definite `k x k`
+/// matrix `m` (row-major), which becomes its Cholesky factor. `false` if `m` is not positive
+/// definite (nothing is then to be applied).
+fn solve_cholesky(m: &mut [f64], b: &mut [f64], k: usize) -> bool {
+    for j in 0..k {
+        let d = m[j * k + j] - (0..j).map(|p| m[j * k + p] * m[j * k + p]).sum::<f64>();
+        if d <= 0.0 || !d.is_finite() {
+            return false;
+        }
+        let d = d.sqrt();
+        m[j * k + j] = d;
+        for i in j + 1..k {
+            let s = m[i * k + j] - (0..j).map(|p| m[i * k + p] * m[j * k + p]).sum::<f64>();
+            m[i * k + j] = s / d;
+        }
+    }
+    for i in 0..k {
+        let s = b[i] - (0..i).map(|p| m[i * k + p] * b[p]).sum::<f64>();
+        b[i] = s / m[i * k + i];
+    }
+    for i in (0..k).rev() {
+        let s = b[i] - (i + 1..k).map(|p| m[p * k + i] * b[p]).sum::<f64>();
+        b[i] = s / m[i * k + i];
+    }
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::core::box_grid;
+    use glam::UVec3;
+
+    /// A squashed box gets every cluster's volume back to first order, its momentum unmoved,
+    /// and a particle pressed on the ground is not pushed into it.
+    #[test]
+    fn a_squashed_box_gets_its_clusters_volume_back() {
+        let mesh = box_grid(UVec3::new(6, 6, 6), Vec3::splat(0.1), Vec3::ZERO).unwrap();
+        let mut clusters = ClusterVolumes::new(&mesh, 8);
+        assert!(
+            (4..=16).contains(&clusters.clusters),
+            "{}",
+            clusters.clusters
+        );
+        let mut x: Vec<Vec3> = mesh
+            .positions()
+            .iter()
+            .map(|p| Vec3::new(p.x * (1.0 + 0.1 * p.y), p.y * 0.9, p.z))
+            .collect();
+        let before: Vec<Vec3> = x.clone();
+        let w: Vec<f32> = (0..x.len()).map(|i| 1.0 + (i % 3) as f32).collect();
+        let normals: Vec<Vec3> = x
+            .iter()
+            .map(|p| if p.y == 0.0 { Vec3::Y } else { Vec3::ZERO })
+            .collect();
+        let kept = vec![0.0; x.len()];
+        for _ in 0..3 {
+            clusters.correct(&mesh, &mut x, &w, &normals, &kept);
+        }
+        clusters.measure(&mesh, &x);
+        for (v, v0) in clusters.volume.iter().zip(&clusters.rest) {
+            assert!(((v - v0) / v0).abs() < 1e-4, "{v} against {v0}");
+        }
+        let momentum: Vec3 = x
+            .iter()
+            .zip(&before)
+            .zip(&w)
+            .map(|((a, b), w)| (*a - *b) / *w)
+            .sum();
+        // Without the ground's particles' normal pushes, which the ground takes.
+        let ground: f32 = x
+            .iter()
+            .zip(&before)
+            .zip(&w)
+            .filter(|((_, b), _)| b.y == 0.0)
+            .map(|((a, b), w)| (a.y - b.y) / w)
+            .sum();
+        assert_eq!(ground, 0.0);
+        assert!(
+            momentum.x.abs() < 1e-5 && momentum.z.abs() < 1e-5,
+            "{momentum}"
+        );
+    }
+}
