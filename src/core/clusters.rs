@@ -15,6 +15,9 @@
 //! A particle touching a collider does not move into it (the push along its contact normal is
 //! taken out of `W`, which keeps `G W G^T` symmetric).
 //!
+//! Before that, a tet left inside out is put back to its rest volume on its own
+//! ([`turn_inverted_tets_back`]).
+//!
 //! It runs once a step, after the last substep, on the positions only: the velocities keep what
 //! the substeps gave them, so the correction adds no energy (it is a projection of where the
 //! step ends, as XPBD's own constraints are). Measured against the alternatives (in every
@@ -134,6 +137,7 @@ impl ClusterVolumes {
         normals: &[Vec3],
         kept: &[f32],
     ) {
+        turn_inverted_tets_back(mesh, positions, inv_masses);
         self.measure(mesh, positions);
         self.assemble(inv_masses, normals, kept);
         if !solve_cholesky(&mut self.matrix, &mut self.rhs, self.clusters) {
@@ -229,6 +233,33 @@ pub(crate) fn correct_cluster_volumes(
     clusters.correct(mesh, positions, inv_masses, normals, kept);
 }
 
+/// Puts each tet left inside out back to its rest volume, one at a time (a projection of that
+/// tet alone), before the clusters are measured. A sliver flips at a touch, and XPBD's sweep,
+/// which moves every tet a little each substep, leaves it flipped: the TetGen creature kept up
+/// to 15 inside out at rest, which the render mesh embedded in them shows turned inside out.
+/// Its particles are moved as the tet needs, even into what they touch (the next substep's
+/// contacts push them out): with the contacts' pushes taken out, tets lying on the ground stayed
+/// flipped (PERFORMANCE.md, "Cluster volume correction").
+fn turn_inverted_tets_back(mesh: &TetMesh, positions: &mut [Vec3], inv_masses: &[f32]) {
+    for (tet, &v0) in mesh.tets().iter().zip(mesh.rest_volumes()) {
+        let x = tet.map(|i| positions[i as usize]);
+        let volume = signed_volume(&x);
+        if volume >= 0.0 {
+            continue;
+        }
+        let g = volume_gradients(&x);
+        let w = tet.map(|i| inv_masses[i as usize]);
+        let denominator: f32 = (0..4).map(|k| w[k] * g[k].length_squared()).sum();
+        if denominator <= 0.0 || !denominator.is_finite() {
+            continue;
+        }
+        let step = (v0 - volume) / denominator;
+        for k in 0..4 {
+            positions[tet[k] as usize] += (step * w[k]) * g[k];
+        }
+    }
+}
+
 /// `a` without the part along a contact's outward normal `n` that the particle does not keep
 /// (all of it against a static collider, `kept = 0`): the particle slides along what it
 /// touches.
@@ -318,5 +349,29 @@ mod tests {
             momentum.x.abs() < 1e-5 && momentum.z.abs() < 1e-5,
             "{momentum}"
         );
+    }
+
+    /// A tet turned inside out (a corner pushed through its opposite face) is turned back.
+    #[test]
+    fn a_tet_inside_out_is_turned_back() {
+        let mesh = box_grid(UVec3::new(3, 3, 3), Vec3::splat(0.1), Vec3::ZERO).unwrap();
+        let mut x = mesh.positions().to_vec();
+        let t = mesh.tet_count() / 2;
+        let [a, b, c, d] = mesh.tets()[t].map(|i| i as usize);
+        let centre = (x[b] + x[c] + x[d]) / 3.0;
+        x[a] = centre + 0.5 * (centre - x[a]);
+        let inverted = |x: &[Vec3]| {
+            mesh.tets()
+                .iter()
+                .filter(|tet| signed_volume(&tet.map(|i| x[i as usize])) < 0.0)
+                .count()
+        };
+        assert!(inverted(&x) > 0);
+        let w = vec![1.0; x.len()];
+        let none = vec![Vec3::ZERO; x.len()];
+        let kept = vec![0.0; x.len()];
+        let mut clusters = ClusterVolumes::new(&mesh, 8);
+        clusters.correct(&mesh, &mut x, &w, &none, &kept);
+        assert_eq!(inverted(&x), 0);
     }
 }
