@@ -7,12 +7,13 @@
 //! given by its `.node` file (the `.ele` beside it). The model is scaled so that its largest
 //! side is `--size` metres (default 1; printed as `scale`) and dropped at Earth gravity in a
 //! preset material (`jelly`, `flesh`, `rubber`, `hard_rubber`) from rest, its lowest point
-//! 0.5 m above the ground, stepped at `--hz` (30 to 240) with the paper's method or XPBD (10
-//! substeps). Headless, it prints the volume error after every simulated second, then one line
-//! as `bench` prints its own: `mesh=NAME preset=NAME method=NAME hz=N tets=N mean_step_ms=X
-//! max_step_ms=X peak_volume_error_pct=X final_inverted_tets=N asleep_s=X` (`-`: not asleep at
-//! the end). In a window (feature `examples`) it shows the model's own surface (for TetGen
-//! input, the tet mesh's boundary) embedded in the tets; `--screenshot PATH --frames N` saves a
+//! 0.5 m above the ground, stepped at `--hz` (30 to 240) with the paper's method, XPBD (10
+//! substeps) or XPBD with its cluster volume correction (`clusters`). Headless, it prints the
+//! volume error after every simulated second, then one line as `bench` prints its own:
+//! `mesh=NAME preset=NAME method=NAME hz=N tets=N mean_step_ms=X max_step_ms=X
+//! peak_volume_error_pct=X final_inverted_tets=N asleep_s=X` (`-`: not asleep at the end). In a
+//! window (feature `examples`) it shows the model's own surface (for TetGen input, the tet mesh's
+//! boundary) embedded in the tets; `--screenshot PATH --frames N` saves a
 //! picture and exits.
 
 #[cfg(feature = "examples")]

@@ -174,11 +174,13 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
         ui.radio_value(&mut chosen, "baseline", "baseline");
         ui.radio_value(&mut chosen, "paper", "impulses");
         ui.radio_value(&mut chosen, "xpbd", "XPBD");
+        ui.radio_value(&mut chosen, "clusters", "XPBD + clusters");
     });
     if chosen != m.method.name() {
         m.method = match chosen {
             "baseline" => VolumeMethod::PAPER_BASELINE,
             "xpbd" => VolumeMethod::XPBD,
+            "clusters" => VolumeMethod::XPBD_CLUSTERS,
             _ => VolumeMethod::Impulses(ImpulseSettings::PAPER),
         };
     }
@@ -202,6 +204,9 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
                     .logarithmic(true)
                     .text("substeps"),
             );
+            if s.clusters > 0 {
+                ui.add(egui::Slider::new(&mut s.clusters, 1..=64).text("clusters"));
+            }
         }
     }
     match &mut m.elasticity {
