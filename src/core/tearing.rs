@@ -83,6 +83,11 @@ pub(crate) fn largest_strain(mesh: &TetMesh, positions: &[Vec3], rest: &[f32]) -
         .fold(f32::NEG_INFINITY, f32::max)
 }
 
+/// The centre of the tet of corners `tet` among `positions`.
+fn tet_centre(tet: [u32; 4], positions: &[Vec3]) -> Vec3 {
+    tet.iter().map(|&k| positions[k as usize]).sum::<Vec3>() / 4.0
+}
+
 /// The mesh after this step's cracks at `positions` (`rest` the edges' rest lengths), given
 /// the faces cracked before (`cracks`, pairs of face-neighbouring tets, added to), or `None`
 /// if no particle splits. Without `new_crack` only a crack already started runs on: the seed
@@ -96,13 +101,7 @@ pub(crate) fn tear_mesh(
     new_crack: bool,
 ) -> Result<Option<TornMesh>, TetMeshError> {
     let tets = mesh.tets();
-    let centre = |t: u32| {
-        tets[t as usize]
-            .iter()
-            .map(|&k| positions[k as usize])
-            .sum::<Vec3>()
-            / 4.0
-    };
+    let centre = |t: u32| tet_centre(tets[t as usize], positions);
     // The crack's seed: the most stretched edge, its tet, and the plane across it.
     let strain = |e: usize| {
         let [i, j] = mesh.edges()[e];
@@ -164,13 +163,7 @@ pub(crate) fn crack_crossed(
     crosses: &dyn Fn(Vec3, Vec3) -> bool,
 ) -> Option<Vec3> {
     let tets = mesh.tets();
-    let centre = |t: u32| {
-        tets[t as usize]
-            .iter()
-            .map(|&k| positions[k as usize])
-            .sum::<Vec3>()
-            / 4.0
-    };
+    let centre = |t: u32| tet_centre(tets[t as usize], positions);
     let mut normal = None;
     for t in 0..tets.len() as u32 {
         for n in face_neighbours(mesh, t).into_iter().filter(|&n| n > t) {
