@@ -106,6 +106,30 @@ fn slab(style: MeshStyle, corner: Vec3) -> SoftBody {
     body
 }
 
+/// An app stepping at `hz` with the ground and three jelly slabs (`slab`) stacked a centimetre
+/// apart, a little off each other; the slabs in stack order.
+fn stack_of_three(style: MeshStyle, hz: f64) -> (App, Vec<Entity>) {
+    let mut app = app(
+        Vec3::new(0.0, -9.81, 0.0),
+        Duration::from_secs_f64(1.0 / hz),
+    );
+    app.world_mut()
+        .spawn((StaticCollider::ground(0.8), Transform::default()));
+    let order = [
+        Vec3::new(0.0, 0.0, 0.0),
+        Vec3::new(0.01, 0.11, -0.01),
+        Vec3::new(0.0, 0.22, 0.01),
+    ]
+    .into_iter()
+    .map(|corner| {
+        app.world_mut()
+            .spawn((slab(style, corner), Transform::default()))
+            .id()
+    })
+    .collect();
+    (app, order)
+}
+
 /// Three jelly slabs dropped a centimetre apart in a stack on the ground come to rest, at 30,
 /// 60 and 120 Hz, on the crate's grid and on a jittered mesh: over the last two of six seconds
 /// no centre of mass moves more than 3 mm, each body keeps its volume within 1 %, and no
@@ -116,24 +140,7 @@ fn slab(style: MeshStyle, corner: Vec3) -> SoftBody {
 fn a_stack_of_three_jellies_comes_to_rest() {
     for hz in [30.0, 60.0, 120.0] {
         for style in [MeshStyle::Grid, MeshStyle::Jittered(0.3)] {
-            let mut app = app(
-                Vec3::new(0.0, -9.81, 0.0),
-                Duration::from_secs_f64(1.0 / hz),
-            );
-            app.world_mut()
-                .spawn((StaticCollider::ground(0.8), Transform::default()));
-            let order: Vec<Entity> = [
-                Vec3::new(0.0, 0.0, 0.0),
-                Vec3::new(0.01, 0.11, -0.01),
-                Vec3::new(0.0, 0.22, 0.01),
-            ]
-            .into_iter()
-            .map(|corner| {
-                app.world_mut()
-                    .spawn((slab(style, corner), Transform::default()))
-                    .id()
-            })
-            .collect();
+            let (mut app, order) = stack_of_three(style, hz);
             let steps = |seconds: f64| (seconds * hz).round() as usize;
             for _ in 0..steps(4.0) {
                 app.update();
@@ -174,24 +181,7 @@ fn a_stack_of_three_jellies_comes_to_rest() {
 fn a_stack_of_jellies_falls_asleep_together() {
     for style in [MeshStyle::Grid, MeshStyle::Jittered(0.3)] {
         let hz = 60.0;
-        let mut app = app(
-            Vec3::new(0.0, -9.81, 0.0),
-            Duration::from_secs_f64(1.0 / hz),
-        );
-        app.world_mut()
-            .spawn((StaticCollider::ground(0.8), Transform::default()));
-        let order: Vec<Entity> = [
-            Vec3::new(0.0, 0.0, 0.0),
-            Vec3::new(0.01, 0.11, -0.01),
-            Vec3::new(0.0, 0.22, 0.01),
-        ]
-        .into_iter()
-        .map(|corner| {
-            app.world_mut()
-                .spawn((slab(style, corner), Transform::default()))
-                .id()
-        })
-        .collect();
+        let (mut app, order) = stack_of_three(style, hz);
         let asleep = |app: &App| {
             order
                 .iter()
