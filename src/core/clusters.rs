@@ -3,8 +3,8 @@
 //!
 //! XPBD's per-tet volume constraints, one Gauss-Seidel sweep a substep, hold each tet near its
 //! volume but leave the body's smooth, low-frequency loss (a sag under gravity, a landing's
-//! squash, what the contacts take back after the sweep) to later substeps that never catch up:
-//! 1-3 % on a landing at 60 Hz, more at 30. That part is what a few large regions see. The tets
+//! squash, what the contacts take back after the sweep) to later substeps that never catch up.
+//! That part is what a few large regions see. The tets
 //! are grouped into clusters (the cells of a grid over the rest shape, about
 //! [`XpbdSettings::clusters`](super::material::XpbdSettings::clusters) of them); each cluster's
 //! volume `C_c = sum of its tets' (V - V0)` is a constraint with gradient
@@ -217,7 +217,7 @@ impl ClusterVolumes {
 
 /// [`ClusterVolumes::correct`] with about `requested` clusters of `mesh`, made anew in
 /// `clusters` first if they were made for another number or another mesh (a body's first step
-/// with them, or a torn body's).
+/// with them; a torn body has new particles).
 pub(crate) fn correct_cluster_volumes(
     clusters: &mut ClusterVolumes,
     requested: u32,
@@ -227,7 +227,10 @@ pub(crate) fn correct_cluster_volumes(
     normals: &[Vec3],
     kept: &[f32],
 ) {
-    if clusters.requested != requested || clusters.tet_cluster.len() != mesh.tet_count() {
+    if clusters.requested != requested
+        || clusters.tet_cluster.len() != mesh.tet_count()
+        || clusters.slot_starts.len() != positions.len() + 1
+    {
         *clusters = ClusterVolumes::new(mesh, requested);
     }
     clusters.correct(mesh, positions, inv_masses, normals, kept);
@@ -235,11 +238,10 @@ pub(crate) fn correct_cluster_volumes(
 
 /// Puts each tet left inside out back to its rest volume, one at a time (a projection of that
 /// tet alone), before the clusters are measured. A sliver flips at a touch, and XPBD's sweep,
-/// which moves every tet a little each substep, leaves it flipped: the TetGen creature kept up
-/// to 15 inside out at rest, which the render mesh embedded in them shows turned inside out.
-/// Its particles are moved as the tet needs, even into what they touch (the next substep's
-/// contacts push them out): with the contacts' pushes taken out, tets lying on the ground stayed
-/// flipped (PERFORMANCE.md, "Cluster volume correction").
+/// which moves every tet a little each substep, leaves it flipped, and the render mesh embedded
+/// in it with it. Its particles are moved as the tet needs, even into what they touch (the next
+/// substep's contacts push them out): a tet lying on the ground must be able to lift its corners
+/// off it (PERFORMANCE.md, "Cluster volume correction").
 fn turn_inverted_tets_back(mesh: &TetMesh, positions: &mut [Vec3], inv_masses: &[f32]) {
     for (tet, &v0) in mesh.tets().iter().zip(mesh.rest_volumes()) {
         let x = tet.map(|i| positions[i as usize]);

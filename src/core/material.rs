@@ -26,7 +26,8 @@ pub enum VolumeMethod {
 #[derive(Clone, Copy, Debug, PartialEq)]
 #[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
 pub struct XpbdSettings {
-    /// Substeps per step, each with one pass over every constraint and its own contacts.
+    /// Substeps per step (with [`XpbdSettings::clusters`], per 1/60 s of step), each with one
+    /// pass over every constraint and its own contacts.
     pub substeps: u32,
     /// About how many regions (clusters of tets, cells of a grid over the rest shape) get their
     /// volume back exactly at the end of each step, all together (`core/clusters.rs`); 0 for
