@@ -15,8 +15,9 @@
 //! A particle touching a collider does not move into it (the push along its contact normal is
 //! taken out of `W`, which keeps `G W G^T` symmetric).
 //!
-//! Before that, a tet left inside out is put back to its rest volume on its own
-//! ([`turn_inverted_tets_back`]).
+//! Before it, a tet left inside out is put back to its rest volume on its own
+//! ([`turn_inverted_tets_back`]); the correction's push can fold a sliver again, which is then
+//! turned back and the clusters corrected once more.
 //!
 //! It runs once a step, after the last substep, on the positions only: the velocities keep what
 //! the substeps gave them, so the correction adds no energy (it is a projection of where the
@@ -128,7 +129,9 @@ impl ClusterVolumes {
 
     /// Moves `positions` so that every cluster has its rest volume (to first order), particles
     /// of inverse mass `inv_masses`, those touching a collider (`normals[i]` non-zero, keeping
-    /// `kept[i]` of a push into it) not pushed into it.
+    /// `kept[i]` of a push into it) not pushed into it. Tets left inside out are turned back
+    /// first; if the correction's push folds one again, it is turned back and the clusters
+    /// corrected once more (a sliver's turn changes its cluster's volume).
     pub(crate) fn correct(
         &mut self,
         mesh: &TetMesh,
@@ -137,12 +140,22 @@ impl ClusterVolumes {
         normals: &[Vec3],
         kept: &[f32],
     ) {
-        turn_inverted_tets_back(mesh, positions, inv_masses);
-        self.measure(mesh, positions);
-        self.assemble(inv_masses, normals, kept);
-        if !solve_cholesky(&mut self.matrix, &mut self.rhs, self.clusters) {
-            return;
+        for round in 0..2 {
+            let turned = turn_inverted_tets_back(mesh, positions, inv_masses);
+            if round > 0 && turned == 0 {
+                return;
+            }
+            self.measure(mesh, positions);
+            self.assemble(inv_masses, normals, kept);
+            if !solve_cholesky(&mut self.matrix, &mut self.rhs, self.clusters) {
+                return;
+            }
+            self.push(positions, inv_masses, normals, kept);
         }
+    }
+
+    /// Moves each particle by `w G^T q` (`q` the solution in `rhs`), not into what it touches.
+    fn push(&self, positions: &mut [Vec3], inv_masses: &[f32], normals: &[Vec3], kept: &[f32]) {
         for (i, x) in positions.iter_mut().enumerate() {
             let w = inv_masses[i];
             if w == 0.0 {
@@ -237,12 +250,13 @@ pub(crate) fn correct_cluster_volumes(
 }
 
 /// Puts each tet left inside out back to its rest volume, one at a time (a projection of that
-/// tet alone), before the clusters are measured. A sliver flips at a touch, and XPBD's sweep,
+/// tet alone), before the clusters are measured; returns how many it turned. A sliver flips at a touch, and XPBD's sweep,
 /// which moves every tet a little each substep, leaves it flipped, and the render mesh embedded
 /// in it with it. Its particles are moved as the tet needs, even into what they touch (the next
 /// substep's contacts push them out): a tet lying on the ground must be able to lift its corners
 /// off it (PERFORMANCE.md, "Cluster volume correction").
-fn turn_inverted_tets_back(mesh: &TetMesh, positions: &mut [Vec3], inv_masses: &[f32]) {
+fn turn_inverted_tets_back(mesh: &TetMesh, positions: &mut [Vec3], inv_masses: &[f32]) -> u32 {
+    let mut turned = 0;
     for (tet, &v0) in mesh.tets().iter().zip(mesh.rest_volumes()) {
         let x = tet.map(|i| positions[i as usize]);
         let volume = signed_volume(&x);
@@ -259,7 +273,9 @@ fn turn_inverted_tets_back(mesh: &TetMesh, positions: &mut [Vec3], inv_masses: &
         for k in 0..4 {
             positions[tet[k] as usize] += (step * w[k]) * g[k];
         }
+        turned += 1;
     }
+    turned
 }
 
 /// `a` without the part along a contact's outward normal `n` that the particle does not keep

@@ -155,15 +155,15 @@ const INV_SQRT_6: f32 = 0.408_248_3;
 pub(crate) struct ShapeBundle {
     /// The corners by corner and lane: `[k][l]` is corner `k` of lane `l` (0 in a lane holding
     /// no tet).
-    corners: [[usize; LANES]; 4],
+    pub(crate) corners: [[usize; LANES]; 4],
     /// Whether each lane holds a tet.
-    filled: [bool; LANES],
+    pub(crate) filled: [bool; LANES],
     /// Each corner's `g_k` (see the module's doc); zero in an empty lane.
     gradients: [Vec3x4; 4],
     /// Rest volumes (0 in an empty lane).
-    rest_volume: f32x4,
+    pub(crate) rest_volume: f32x4,
     /// Each corner's inverse mass this step (0 in an empty lane).
-    inv_masses: [f32x4; 4],
+    pub(crate) inv_masses: [f32x4; 4],
     /// `S = sum w_k g_k g_k^T` this step, as `[xx, yy, zz, xy, xz, yz]`.
     gram: [f32x4; 6],
 }

@@ -49,7 +49,7 @@ use super::parallel::{Parallel, Serial};
 use super::soft_records::{hand_soft_pushes, take_soft_pushes};
 use super::substep_plan::SubstepPlan;
 use super::tearing::{crack_crossed, largest_strain, split_particles, tear_mesh};
-use super::xpbd::{EdgeConstraints, project_edges, project_volumes};
+use super::xpbd::{EdgeConstraints, project_edges, project_volume_bundles};
 use parry3d::bounding_volume::BoundingVolume;
 use parry3d::query::Ray;
 
@@ -319,7 +319,8 @@ impl SoftBodyState {
             (Elasticity::Elastic(e), None) if !volumes => Some(e.tet_compliance()),
             _ => None,
         };
-        if tet_compliance.is_some() {
+        // The tet shape model and XPBD's volume sweep take the inverse masses from the bundles.
+        if tet_compliance.is_some() || volumes {
             refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
         }
         // The rigid bodies of another engine get their gravity per substep too.
@@ -547,7 +548,7 @@ impl SoftBodyState {
             ),
         }
         if plan.volumes {
-            project_volumes(&mut self.positions, &self.mesh, &self.inv_masses);
+            project_volume_bundles(&self.scratch.shape_bundles, &mut self.positions);
         }
     }
 

@@ -26,9 +26,11 @@
 //! [`VolumeMethod::Xpbd`]: super::material::VolumeMethod::Xpbd
 
 use glam::Vec3;
+use wide::f32x4;
 
-use super::geometry::{signed_volume, volume_gradients};
+use super::deviatoric::ShapeBundle;
 use super::lanes::Point4;
+use super::lanes::{LANES, Vec3x4};
 use super::tet_mesh::TetMesh;
 
 /// The edges as XPBD constraints: each edge's rest length and compliance (`1 / k_D`).
@@ -85,30 +87,36 @@ pub(crate) fn project_edges(
     }
 }
 
-/// One Gauss-Seidel pass over the tets' volume constraints of `mesh` (zero compliance) on the
-/// positions `x`, in index order. The per-tet pass's bundle order (see
-/// [`Blocks::tet_bundles`](super::tet_mesh::Blocks::tet_bundles)) made this pass twice as
-/// fast, but a sweep in index order carries a correction across the mesh in one pass, and
-/// without it the peer lost several times its accuracy (PERFORMANCE.md, "Against XPBD").
-pub(crate) fn project_volumes(x: &mut [Vec3], mesh: &TetMesh, inv_masses: &[f32]) {
-    for (tet, &v0) in mesh.tets().iter().zip(mesh.rest_volumes()) {
-        let p = tet.map(|i| x[i as usize]);
-        let c = (signed_volume(&p) - v0) / v0;
-        if c == 0.0 {
-            continue;
-        }
-        let g = volume_gradients(&p);
-        let denominator: f32 = (0..4)
-            .map(|k| inv_masses[tet[k] as usize] * g[k].length_squared())
-            .sum::<f32>()
-            / (v0 * v0);
-        if denominator <= 0.0 {
-            continue;
-        }
-        let lambda = -c / denominator;
+/// One pass over every tet's volume constraint `C = (V - V0) / V0` (zero compliance), four
+/// tets at a time: the tets of a bundle share no particle, so each lane is its tet's own
+/// projection, and the bundles come in index order (each takes the next tets free of its first
+/// one's particles; `deviatoric::shape_bundles`), so the sweep is Gauss-Seidel in nearly index
+/// order. Needs `refresh_shape_bundles` this step (the inverse masses).
+pub(crate) fn project_volume_bundles(bundles: &[ShapeBundle], x: &mut [Vec3]) {
+    let sixth = f32x4::splat(1.0 / 6.0);
+    for b in bundles {
+        let [a, bb, c, d] = b
+            .corners
+            .map(|lanes| Vec3x4::from_vecs(lanes.map(|i| x[i])));
+        let g_a = (bb - d).cross(c - d).scale(sixth);
+        let g_b = (c - d).cross(a - d).scale(sixth);
+        let g_c = (a - d).cross(bb - d).scale(sixth);
+        let g_d = -(g_a + g_b + g_c);
+        let g = [g_a, g_b, g_c, g_d];
+        let volume = (a - d).dot(g_a);
+        let w = b.inv_masses;
+        let denominator = (0..4).fold(f32x4::ZERO, |s, k| s + w[k] * g[k].length_squared());
+        // `dx_k = -w_k g_k (V - V0) / sum w |g|^2`: the constraint `(V - V0) / V0` solved to
+        // first order. Zero in an empty lane or a tet no free particle can move.
+        let step = (b.rest_volume - volume) / denominator;
+        let step = step.is_finite().blend(step, f32x4::ZERO);
         for k in 0..4 {
-            let i = tet[k] as usize;
-            x[i] += g[k] * (inv_masses[i] * lambda / v0);
+            let moves = g[k].scale(w[k] * step).to_vecs();
+            for l in 0..LANES {
+                if b.filled[l] {
+                    x[b.corners[k][l]] += moves[l];
+                }
+            }
         }
     }
 }
