@@ -36,8 +36,6 @@ use super::tet_mesh::TetMesh;
 pub(crate) struct ClusterVolumes {
     /// The number of clusters asked for (the grid's cells are sized for it).
     requested: u32,
-    /// The number of clusters made (the grid's cells that hold a tet's centre).
-    clusters: usize,
     /// Per tet, its cluster.
     tet_cluster: Vec<u32>,
     /// Per particle, where its slots start in `slot_cluster` (one slot per cluster among its
@@ -114,7 +112,6 @@ impl ClusterVolumes {
         }
         ClusterVolumes {
             requested,
-            clusters,
             tet_cluster,
             gradients: vec![Vec3::ZERO; slot_cluster.len()],
             slot_starts,
@@ -147,7 +144,7 @@ impl ClusterVolumes {
             }
             self.measure(mesh, positions);
             self.assemble(inv_masses, normals, kept);
-            if !solve_cholesky(&mut self.matrix, &mut self.rhs, self.clusters) {
+            if !solve_cholesky(&mut self.matrix, &mut self.rhs, self.rest.len()) {
                 return;
             }
             self.push(positions, inv_masses, normals, kept);
@@ -198,7 +195,7 @@ impl ClusterVolumes {
     /// `G W G^T` and `-C`. A cluster no free particle can change (all of it kinematic) gets
     /// the row of the identity and no correction.
     fn assemble(&mut self, inv_masses: &[f32], normals: &[Vec3], kept: &[f32]) {
-        let k = self.clusters;
+        let k = self.rest.len();
         self.matrix.fill(0.0);
         for (i, &w) in inv_masses.iter().enumerate() {
             if w == 0.0 {
@@ -250,7 +247,7 @@ pub(crate) fn correct_cluster_volumes(
 }
 
 /// Puts each tet left inside out back to its rest volume, one at a time (a projection of that
-/// tet alone), before the clusters are measured; returns how many it turned. A sliver flips at a touch, and XPBD's sweep,
+/// tet alone), and returns how many it turned. A sliver flips at a touch, and XPBD's sweep,
 /// which moves every tet a little each substep, leaves it flipped, and the render mesh embedded
 /// in it with it. Its particles are moved as the tet needs, even into what they touch (the next
 /// substep's contacts push them out): a tet lying on the ground must be able to lift its corners
@@ -325,9 +322,9 @@ mod tests {
         let mesh = box_grid(UVec3::new(6, 6, 6), Vec3::splat(0.1), Vec3::ZERO).unwrap();
         let mut clusters = ClusterVolumes::new(&mesh, 8);
         assert!(
-            (4..=16).contains(&clusters.clusters),
+            (4..=16).contains(&clusters.rest.len()),
             "{}",
-            clusters.clusters
+            clusters.rest.len()
         );
         let mut x: Vec<Vec3> = mesh
             .positions()
