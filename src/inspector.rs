@@ -9,7 +9,7 @@ use bevy_egui::{EguiContexts, EguiPlugin, EguiPrimaryContextPass, egui};
 use egui_plot::{Legend, Line, Plot};
 
 use crate::components::{SoftBody, SoftBodyStats};
-use crate::core::{Elasticity, ImpulseSettings, Plasticity, VolumeMethod};
+use crate::core::{Elasticity, ImpulseSettings, Plasticity, SoftBodyMaterial, VolumeMethod};
 
 /// Shows the inspector panel. Adds `EguiPlugin` if the app has none yet.
 pub struct SoftBodyInspectorPlugin;
@@ -209,6 +209,34 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
             }
         }
     }
+    elasticity_controls(ui, &mut m);
+    let mut plastic = m.plasticity.is_some();
+    ui.checkbox(&mut plastic, "plastic springs");
+    match (plastic, &mut m.plasticity) {
+        (true, None) => {
+            m.plasticity = Some(Plasticity {
+                yield_strain: 0.03,
+                creep: 4.0,
+                max_strain: 0.5,
+            })
+        }
+        (false, Some(_)) => m.plasticity = None,
+        (true, Some(p)) => {
+            ui.add(egui::Slider::new(&mut p.yield_strain, 0.0..=0.5).text("yield"));
+            ui.add(egui::Slider::new(&mut p.creep, 0.0..=20.0).text("creep /s"));
+            ui.add(egui::Slider::new(&mut p.max_strain, 0.0..=0.9).text("max"));
+        }
+        (false, None) => {}
+    }
+    if m != *body.state().material()
+        && let Err(e) = body.set_material(m)
+    {
+        ui.colored_label(egui::Color32::LIGHT_RED, e.to_string());
+    }
+}
+
+/// The sliders of a material's elasticity and damping.
+fn elasticity_controls(ui: &mut egui::Ui, m: &mut SoftBodyMaterial) {
     match &mut m.elasticity {
         Elasticity::Springs {
             distance_stiffness,
@@ -244,27 +272,14 @@ fn body_controls(ui: &mut egui::Ui, body: &mut SoftBody, stats: &SoftBodyStats) 
             .logarithmic(true)
             .text("drag"),
     );
-    let mut plastic = m.plasticity.is_some();
-    ui.checkbox(&mut plastic, "plastic springs");
-    match (plastic, &mut m.plasticity) {
-        (true, None) => {
-            m.plasticity = Some(Plasticity {
-                yield_strain: 0.03,
-                creep: 4.0,
-                max_strain: 0.5,
-            })
-        }
-        (false, Some(_)) => m.plasticity = None,
-        (true, Some(p)) => {
-            ui.add(egui::Slider::new(&mut p.yield_strain, 0.0..=0.5).text("yield"));
-            ui.add(egui::Slider::new(&mut p.creep, 0.0..=20.0).text("creep /s"));
-            ui.add(egui::Slider::new(&mut p.max_strain, 0.0..=0.9).text("max"));
-        }
-        (false, None) => {}
-    }
-    if m != *body.state().material()
-        && let Err(e) = body.set_material(m)
-    {
-        ui.colored_label(egui::Color32::LIGHT_RED, e.to_string());
-    }
+    ui.add(
+        egui::Slider::new(&mut m.deformation_damping, 0.0..=50.0)
+            .logarithmic(true)
+            .text("deformation damping /s"),
+    );
+    ui.add(
+        egui::Slider::new(&mut m.rolling_resistance, 0.0..=1.0)
+            .logarithmic(true)
+            .text("rolling resistance"),
+    );
 }

@@ -223,7 +223,10 @@ impl PaperScene {
                 damping: params.damping,
             },
             linear_damping: params.linear_damping,
+            // The paper's scenes as published: no damping but theirs.
+            deformation_damping: 0.0,
             friction: 0.6,
+            rolling_resistance: 0.0,
             method,
             plasticity: (self == PaperScene::Plastic).then_some(Plasticity {
                 yield_strain: 0.03,

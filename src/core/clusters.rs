@@ -15,19 +15,21 @@
 //! A particle touching a collider does not move into it (the push along its contact normal is
 //! taken out of `W`, which keeps `G W G^T` symmetric).
 //!
-//! Before it, a tet left inside out is put back to its rest volume on its own
-//! ([`turn_inverted_tets_back`]); the correction's push can fold a sliver again, which is then
-//! turned back and the clusters corrected once more.
+//! Before it, a tet left inside out is unfolded on its own (`inversion.rs`); the correction's
+//! push can fold a sliver again, which is then unfolded and the clusters corrected once more,
+//! and what that second push folds is unfolded last.
 //!
-//! It runs once a step, after the last substep, on the positions only: the velocities keep what
-//! the substeps gave them, so the correction adds no energy (it is a projection of where the
-//! step ends, as XPBD's own constraints are). Measured against the alternatives (in every
+//! It runs once a step, after the last substep, on the positions: the velocities keep what the
+//! substeps gave them, so the correction adds no energy (it is a projection of where the step
+//! ends, as XPBD's own constraints are), but for a tet turned back, whose corners lose what of
+//! their velocities would fold it again. Measured against the alternatives (in every
 //! substep, on the velocities, with more clusters, the rings solved together by conjugate
 //! gradients) in PERFORMANCE.md, "Cluster volume correction".
 
 use glam::Vec3;
 
 use super::geometry::{signed_volume, volume_gradients};
+use super::inversion::turn_inverted_tets_back;
 use super::tet_mesh::TetMesh;
 
 /// A body's clusters and the working memory of their correction (sized once, with the body or
@@ -128,17 +130,19 @@ impl ClusterVolumes {
     /// of inverse mass `inv_masses`, those touching a collider (`normals[i]` non-zero, keeping
     /// `kept[i]` of a push into it) not pushed into it. Tets left inside out are turned back
     /// first; if the correction's push folds one again, it is turned back and the clusters
-    /// corrected once more (a sliver's turn changes its cluster's volume).
+    /// corrected once more (a sliver's turn changes its cluster's volume), and what that second
+    /// push folds is turned back last (a sliver's volume, too small to correct for again).
     pub(crate) fn correct(
         &mut self,
         mesh: &TetMesh,
         positions: &mut [Vec3],
+        velocities: &mut [Vec3],
         inv_masses: &[f32],
         normals: &[Vec3],
         kept: &[f32],
     ) {
         for round in 0..2 {
-            let turned = turn_inverted_tets_back(mesh, positions, inv_masses);
+            let turned = turn_inverted_tets_back(mesh, positions, velocities, inv_masses);
             if round > 0 && turned == 0 {
                 return;
             }
@@ -149,6 +153,7 @@ impl ClusterVolumes {
             }
             self.push(positions, inv_masses, normals, kept);
         }
+        turn_inverted_tets_back(mesh, positions, velocities, inv_masses);
     }
 
     /// Moves each particle by `w G^T q` (`q` the solution in `rhs`), not into what it touches.
@@ -232,8 +237,7 @@ pub(crate) fn correct_cluster_volumes(
     clusters: &mut ClusterVolumes,
     requested: u32,
     mesh: &TetMesh,
-    positions: &mut [Vec3],
-    inv_masses: &[f32],
+    (positions, velocities, inv_masses): (&mut [Vec3], &mut [Vec3], &[f32]),
     normals: &[Vec3],
     kept: &[f32],
 ) {
@@ -243,36 +247,7 @@ pub(crate) fn correct_cluster_volumes(
     {
         *clusters = ClusterVolumes::new(mesh, requested);
     }
-    clusters.correct(mesh, positions, inv_masses, normals, kept);
-}
-
-/// Puts each tet left inside out back to its rest volume, one at a time (a projection of that
-/// tet alone), and returns how many it turned. A sliver flips at a touch, and XPBD's sweep,
-/// which moves every tet a little each substep, leaves it flipped, and the render mesh embedded
-/// in it with it. Its particles are moved as the tet needs, even into what they touch (the next
-/// substep's contacts push them out): a tet lying on the ground must be able to lift its corners
-/// off it (PERFORMANCE.md, "Cluster volume correction").
-fn turn_inverted_tets_back(mesh: &TetMesh, positions: &mut [Vec3], inv_masses: &[f32]) -> u32 {
-    let mut turned = 0;
-    for (tet, &v0) in mesh.tets().iter().zip(mesh.rest_volumes()) {
-        let x = tet.map(|i| positions[i as usize]);
-        let volume = signed_volume(&x);
-        if volume >= 0.0 {
-            continue;
-        }
-        let g = volume_gradients(&x);
-        let w = tet.map(|i| inv_masses[i as usize]);
-        let denominator: f32 = (0..4).map(|k| w[k] * g[k].length_squared()).sum();
-        if denominator <= 0.0 || !denominator.is_finite() {
-            continue;
-        }
-        let step = (v0 - volume) / denominator;
-        for k in 0..4 {
-            positions[tet[k] as usize] += (step * w[k]) * g[k];
-        }
-        turned += 1;
-    }
-    turned
+    clusters.correct(mesh, positions, velocities, inv_masses, normals, kept);
 }
 
 /// `a` without the part along a contact's outward normal `n` that the particle does not keep
@@ -338,8 +313,9 @@ mod tests {
             .map(|p| if p.y == 0.0 { Vec3::Y } else { Vec3::ZERO })
             .collect();
         let kept = vec![0.0; x.len()];
+        let mut v = vec![Vec3::ZERO; x.len()];
         for _ in 0..3 {
-            clusters.correct(&mesh, &mut x, &w, &normals, &kept);
+            clusters.correct(&mesh, &mut x, &mut v, &w, &normals, &kept);
         }
         clusters.measure(&mesh, &x);
         for (v, v0) in clusters.volume.iter().zip(&clusters.rest) {
@@ -371,8 +347,7 @@ mod tests {
     fn a_tet_inside_out_is_turned_back() {
         let mesh = box_grid(UVec3::new(3, 3, 3), Vec3::splat(0.1), Vec3::ZERO).unwrap();
         let mut x = mesh.positions().to_vec();
-        let t = mesh.tet_count() / 2;
-        let [a, b, c, d] = mesh.tets()[t].map(|i| i as usize);
+        let [a, b, c, d] = mesh.tets()[mesh.tet_count() / 2].map(|i| i as usize);
         let centre = (x[b] + x[c] + x[d]) / 3.0;
         x[a] = centre + 0.5 * (centre - x[a]);
         let inverted = |x: &[Vec3]| {
@@ -382,11 +357,10 @@ mod tests {
                 .count()
         };
         assert!(inverted(&x) > 0);
-        let w = vec![1.0; x.len()];
-        let none = vec![Vec3::ZERO; x.len()];
-        let kept = vec![0.0; x.len()];
+        let (w, kept) = (vec![1.0; x.len()], vec![0.0; x.len()]);
+        let (none, mut v) = (vec![Vec3::ZERO; x.len()], vec![Vec3::ZERO; x.len()]);
         let mut clusters = ClusterVolumes::new(&mesh, 8);
-        clusters.correct(&mesh, &mut x, &w, &none, &kept);
+        clusters.correct(&mesh, &mut x, &mut v, &w, &none, &kept);
         assert_eq!(inverted(&x), 0);
     }
 }

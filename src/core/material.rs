@@ -342,8 +342,27 @@ pub struct SoftBodyMaterial {
     /// also slows a falling body, so keep it small (0 is a body in vacuum, and conserves
     /// momentum).
     pub linear_damping: f32,
+    /// Deformation damping, per second (the mass-proportional half of Rayleigh damping, `alpha`):
+    /// every step keeps `exp(-alpha h)` of each particle's velocity relative to the body's rigid
+    /// motion. A mode of angular frequency `w` gets the damping ratio `alpha / (2 w)` on top of
+    /// the shape solve's `beta w / 2` ([`ElasticSettings::damping`]): the slow wobbles of long,
+    /// thin parts, which `beta` hardly touches, die, while the body's flight and spin, its
+    /// momentum and angular momentum, are left alone (unlike `linear_damping`). Acts on a body
+    /// stepped in substeps (a physical material, or XPBD). 0 keeps every wobble (and is what a
+    /// saved material without it loads with).
+    #[cfg_attr(feature = "serialize", serde(default))]
+    pub deformation_damping: f32,
     /// Coulomb friction coefficient against colliders and spheres.
     pub friction: f32,
+    /// Rolling resistance coefficient against static colliders (as a wheel's: the torque
+    /// against rolling is this times the weight times the lever): what stops a body rocking on a
+    /// curved underside or rolling on its side, which friction cannot (the contact does not
+    /// slip) and a stiff body's internal damping does not (it rocks as a rigid body). Stands for
+    /// the hysteresis of the contact patch, finer than the tets. Acts on a body stepped in
+    /// substeps; 0 lets a ball roll for ever (and is what a saved material without it loads
+    /// with).
+    #[cfg_attr(feature = "serialize", serde(default))]
+    pub rolling_resistance: f32,
     /// How volume is kept.
     pub method: VolumeMethod,
     /// Plastic springs, if any.
@@ -352,14 +371,17 @@ pub struct SoftBodyMaterial {
 
 impl SoftBodyMaterial {
     /// A physical material of `density` (kg/m^3) and Young's modulus `youngs_modulus` (Pa),
-    /// with stiffness-proportional damping `damping` (s), friction 0.5 and the paper's volume
-    /// impulses.
+    /// with stiffness-proportional damping `damping` (s), deformation damping
+    /// [`SoftBodyMaterial::DEFAULT_DEFORMATION_DAMPING`], friction 0.5, rolling resistance
+    /// [`SoftBodyMaterial::DEFAULT_ROLLING_RESISTANCE`] and the paper's volume impulses.
     pub const fn elastic(density: f32, youngs_modulus: f32, damping: f32) -> Self {
         SoftBodyMaterial {
             density,
             elasticity: Elasticity::Elastic(ElasticSettings::new(youngs_modulus, damping)),
             linear_damping: 0.0,
+            deformation_damping: Self::DEFAULT_DEFORMATION_DAMPING,
             friction: 0.5,
+            rolling_resistance: Self::DEFAULT_ROLLING_RESISTANCE,
             method: VolumeMethod::PAPER_IMPULSES,
             plasticity: None,
         }
@@ -374,14 +396,25 @@ impl SoftBodyMaterial {
                 damping,
             },
             linear_damping: 0.0,
+            deformation_damping: 0.0,
             friction: 0.5,
+            rolling_resistance: 0.0,
             method: VolumeMethod::PAPER_IMPULSES,
             plasticity: None,
         }
     }
 
-    /// A jelly: 1 050 kg/m^3, 20 kPa, wobbles for a second after a landing.
-    pub const JELLY: SoftBodyMaterial = SoftBodyMaterial::elastic(1050.0, 2e4, 0.01);
+    /// The deformation damping of [`SoftBodyMaterial::elastic`], per second.
+    pub const DEFAULT_DEFORMATION_DAMPING: f32 = 10.0;
+    /// The rolling resistance of [`SoftBodyMaterial::elastic`].
+    pub const DEFAULT_ROLLING_RESISTANCE: f32 = 0.1;
+
+    /// A jelly: 1 050 kg/m^3, 20 kPa, wobbles after a landing: no deformation damping, so a
+    /// long jelly's slow wobble goes on for seconds (give it some to settle it sooner).
+    pub const JELLY: SoftBodyMaterial = SoftBodyMaterial {
+        deformation_damping: 0.0,
+        ..SoftBodyMaterial::elastic(1050.0, 2e4, 0.01)
+    };
     /// Soft flesh: 1 050 kg/m^3, 150 kPa.
     pub const FLESH: SoftBodyMaterial = SoftBodyMaterial::elastic(1050.0, 1.5e5, 0.005);
     /// Soft rubber (a toy, a ball): 1 100 kg/m^3, 1 MPa.
@@ -495,7 +528,9 @@ impl SoftBodyMaterial {
             }
         }
         non_negative("linear_damping", self.linear_damping)?;
+        non_negative("deformation_damping", self.deformation_damping)?;
         non_negative("friction", self.friction)?;
+        non_negative("rolling_resistance", self.rolling_resistance)?;
         match self.method {
             VolumeMethod::Baseline { volume_stiffness } => {
                 non_negative("volume_stiffness", volume_stiffness)?

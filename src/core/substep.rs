@@ -25,13 +25,16 @@
 //!    the spheres, the rigid bodies of another engine and the static colliders (last, so that
 //!    no particle is left inside the ground by a body pushing it). Bodies stepped together
 //!    meet each other between the shape solve and this stage (`soft_lockstep.rs`).
-//! 3. [`SubstepStage::OneRing`] (section 5): damping, then one impulse per vertex restoring
-//!    its one-ring's volume on the predicted positions `x + h_s v`.
+//! 3. [`SubstepStage::OneRing`] (section 5): damping (drag, the deformation damping and
+//!    rolling resistance of `damping.rs`), then one impulse per vertex restoring its one-ring's
+//!    volume on the predicted positions `x + h_s v`.
 //! 4. [`SubstepStage::PerTet`] (sections 4 and 5): one impulse per tet scaled by gamma, with
 //!    the neighbour clamp.
 //! 5. [`SubstepStage::Advance`]: `x += h_s v`, the volume impulses' velocity change kept as
 //!    far as it adds no energy, friction for what the supports pushed back; for the paper's
 //!    springs a contact pass first (undoing what the volume impulses pushed into a collider).
+//!    After the last substep, tets left inside out are turned back (`inversion.rs`; with
+//!    XPBD's cluster correction, in it).
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -41,8 +44,10 @@ use glam::Vec3;
 use super::body::SoftBodyState;
 use super::clusters::correct_cluster_volumes;
 use super::colliders::{ColliderInstance, RigidSphereState};
+use super::damping::damp_whole_body;
 use super::deviatoric::{project_tet_shapes, refresh_shape_bundles};
 use super::forces::{ForceBody, explicit_forces};
+use super::inversion::turn_inverted_tets_back;
 use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};
 use super::parallel::{Parallel, Serial};
@@ -472,19 +477,25 @@ impl SoftBodyState {
             }
             SubstepStage::Advance => {
                 self.substep_advance(plan);
-                if let VolumeMethod::Xpbd(s) = self.material.method
-                    && s.clusters > 0
-                    && k + 1 == plan.substeps
-                {
-                    correct_cluster_volumes(
-                        &mut self.scratch.clusters,
-                        s.clusters,
-                        &self.mesh,
-                        &mut self.positions,
-                        &self.inv_masses,
-                        &self.contacts.normals,
-                        &self.contacts.kept,
-                    );
+                let (x, v, w) = (&mut self.positions, &mut self.velocities, &self.inv_masses);
+                match self.material.method {
+                    _ if k + 1 < plan.substeps => {}
+                    VolumeMethod::Xpbd(s) if s.clusters > 0 => {
+                        let (n, kept) = (&self.contacts.normals, &self.contacts.kept);
+                        let clusters = &mut self.scratch.clusters;
+                        correct_cluster_volumes(
+                            clusters,
+                            s.clusters,
+                            &self.mesh,
+                            (x, v, w),
+                            n,
+                            kept,
+                        );
+                    }
+                    VolumeMethod::Impulses(_) => {
+                        turn_inverted_tets_back(&self.mesh, x, v, w);
+                    }
+                    _ => {}
                 }
                 0
             }
@@ -593,8 +604,9 @@ impl SoftBodyState {
         contacts + self.resolve_static_contacts(hs, colliders, &Serial)
     }
 
-    /// A substep's damping (the paper's spring dampers, drag), then, before the volume
-    /// impulses, the velocities they start from (for [`SoftBodyState::substep_advance`]).
+    /// A substep's damping (the paper's spring dampers, drag, the deformation damping and
+    /// rolling resistance of `damping.rs`), then, before the volume impulses, the velocities
+    /// they start from (for [`SoftBodyState::substep_advance`]).
     fn substep_damping(&mut self, plan: &SubstepPlan) {
         let hs = plan.hs;
         if plan.dampers {
@@ -615,6 +627,9 @@ impl SoftBodyState {
                 }
             }
         }
+        let (x, v, m) = (&self.positions, &mut self.velocities, &self.masses);
+        let particles = (&x[..], &mut v[..], &m[..], &self.inv_masses[..]);
+        damp_whole_body(&self.material, self.gravity, hs, particles, &self.contacts);
         if !plan.volumes {
             self.scratch
                 .substep_velocities
