@@ -350,12 +350,7 @@ mod tests {
         let [a, b, c, d] = mesh.tets()[mesh.tet_count() / 2].map(|i| i as usize);
         let centre = (x[b] + x[c] + x[d]) / 3.0;
         x[a] = centre + 0.5 * (centre - x[a]);
-        let inverted = |x: &[Vec3]| {
-            mesh.tets()
-                .iter()
-                .filter(|tet| signed_volume(&tet.map(|i| x[i as usize])) < 0.0)
-                .count()
-        };
+        let inverted = |x: &[Vec3]| crate::core::inversion::inverted_tets(&mesh, x);
         assert!(inverted(&x) > 0);
         let (w, kept) = (vec![1.0; x.len()], vec![0.0; x.len()]);
         let (none, mut v) = (vec![Vec3::ZERO; x.len()], vec![Vec3::ZERO; x.len()]);

@@ -95,6 +95,15 @@ fn tet_projection(x: &[Vec3; 4], w: &[f32; 4], change: f32) -> Option<[Vec3; 4]>
     Some(std::array::from_fn(|k| (step * w[k]) * g[k]))
 }
 
+/// How many tets of `mesh` are inside out at `positions` (for tests).
+#[cfg(test)]
+pub(crate) fn inverted_tets(mesh: &TetMesh, positions: &[Vec3]) -> usize {
+    mesh.tets()
+        .iter()
+        .filter(|tet| signed_volume(&tet.map(|i| positions[i as usize])) < 0.0)
+        .count()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -121,12 +130,7 @@ mod tests {
         };
         let before = folding(mesh.positions(), &v);
         assert!(before < 0.0);
-        let inverted = |x: &[Vec3]| {
-            mesh.tets()
-                .iter()
-                .filter(|tet| signed_volume(&tet.map(|i| x[i as usize])) < 0.0)
-                .count()
-        };
+        let inverted = |x: &[Vec3]| inverted_tets(&mesh, x);
         assert!(inverted(&x) > 0);
         let w = vec![1.0; x.len()];
         assert_eq!(turn_inverted_tets_back(&mesh, &mut x, &mut v, &w), 1);
