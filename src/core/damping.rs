@@ -1,6 +1,7 @@
-//! Damping of a body as a whole, in each substep before the volume passes: deformation damping (the
-//! mass-proportional half of Rayleigh damping, on the motion relative to the body's rigid
-//! motion) and rolling resistance (what stops a body rocking or rolling on what it rests on).
+//! Damping of a body as a whole, once a step in its first substep before the volume passes:
+//! deformation damping (the mass-proportional half of Rayleigh damping, on the motion relative
+//! to the body's rigid motion) and rolling resistance (what stops a body rocking or rolling on
+//! what it rests on).
 //!
 //! The shape solve's damping is stiffness-proportional (`ElasticSettings::damping`): a mode of
 //! angular frequency `w` gets the damping ratio `beta w / 2`, so a slow wobble of a long body
@@ -19,8 +20,8 @@ use glam::{Mat3, Vec3};
 use super::contacts::ContactState;
 use super::material::SoftBodyMaterial;
 
-/// The material's deformation damping and rolling resistance over a substep of `h` for a body
-/// in `gravity` whose particles are `(positions, velocities, masses, inv_masses)`; rolling is
+/// The material's deformation damping and rolling resistance over a step of `h` for a body in
+/// `gravity` whose particles are `(positions, velocities, masses, inv_masses)`; rolling is
 /// resisted on the static colliders the substep's contacts touched (`contacts`). Before the
 /// volume passes, which then restore what the damping took from a tet's volume.
 pub(crate) fn damp_whole_body(
@@ -44,6 +45,19 @@ pub(crate) fn damp_whole_body(
     let resting = resting.filter(|&i| contacts.anchors[i].is_finite());
     let resting = resting.map(|i| (i, contacts.normals[i]));
     motion.resist_rolling(x, v, m, w, resting, gravity, rolling, h);
+}
+
+/// Drag at `rate` (1/s, `SoftBodyMaterial::linear_damping`) over a substep of `h`: each free
+/// particle keeps `1 / (1 + h rate)` of its velocity.
+pub(crate) fn drag(velocities: &mut [Vec3], inv_masses: &[f32], rate: f32, h: f32) {
+    if rate > 0.0 {
+        let keep = 1.0 / (1.0 + h * rate);
+        for (v, &w) in velocities.iter_mut().zip(inv_masses) {
+            if w > 0.0 {
+                *v *= keep;
+            }
+        }
+    }
 }
 
 /// A body's rigid motion: the velocity field `velocity + spin x (x - centre)` closest to its

@@ -15,7 +15,7 @@ const UNFOLDED: f32 = 0.1;
 
 /// The most sweeps [`turn_inverted_tets_back`] makes: a first-order turn can leave a sliver
 /// still inside out, or fold a neighbour that shares its corners.
-const SWEEPS: usize = 4;
+const SWEEPS: usize = 8;
 
 /// Turns each tet left inside out back to a tenth of its rest volume ([`UNFOLDED`]), one at a
 /// time (a projection of that tet alone), sweeping the tets again while a sweep turned any (at most [`SWEEPS`]), and

@@ -25,9 +25,9 @@
 //!    the spheres, the rigid bodies of another engine and the static colliders (last, so that
 //!    no particle is left inside the ground by a body pushing it). Bodies stepped together
 //!    meet each other between the shape solve and this stage (`soft_lockstep.rs`).
-//! 3. [`SubstepStage::OneRing`] (section 5): damping (drag, the deformation damping and
-//!    rolling resistance of `damping.rs`), then one impulse per vertex restoring its one-ring's
-//!    volume on the predicted positions `x + h_s v`.
+//! 3. [`SubstepStage::OneRing`] (section 5): damping (drag; in the first substep, the step's
+//!    deformation damping and rolling resistance of `damping.rs`), then one impulse per vertex
+//!    restoring its one-ring's volume on the predicted positions `x + h_s v`.
 //! 4. [`SubstepStage::PerTet`] (sections 4 and 5): one impulse per tet scaled by gamma, with
 //!    the neighbour clamp.
 //! 5. [`SubstepStage::Advance`]: `x += h_s v`, the volume impulses' velocity change kept as
@@ -44,7 +44,7 @@ use glam::Vec3;
 use super::body::SoftBodyState;
 use super::clusters::correct_cluster_volumes;
 use super::colliders::{ColliderInstance, RigidSphereState};
-use super::damping::damp_whole_body;
+use super::damping::{damp_whole_body, drag};
 use super::deviatoric::{project_tet_shapes, refresh_shape_bundles};
 use super::forces::{ForceBody, explicit_forces};
 use super::inversion::turn_inverted_tets_back;
@@ -457,7 +457,7 @@ impl SoftBodyState {
             }
             SubstepStage::OneRing => {
                 if !plan.explicit {
-                    self.substep_damping(plan);
+                    self.substep_damping(plan, k);
                 }
                 if !plan.volumes {
                     self.one_ring_impulses(hs, spheres, parallel);
@@ -604,10 +604,10 @@ impl SoftBodyState {
         contacts + self.resolve_static_contacts(hs, colliders, &Serial)
     }
 
-    /// A substep's damping (the paper's spring dampers, drag, the deformation damping and
-    /// rolling resistance of `damping.rs`), then, before the volume impulses, the velocities
-    /// they start from (for [`SoftBodyState::substep_advance`]).
-    fn substep_damping(&mut self, plan: &SubstepPlan) {
+    /// A substep's damping (the paper's spring dampers, drag; in the first substep `k`, the
+    /// step's deformation damping and rolling resistance, `damping.rs`), then, before the
+    /// volume impulses, the velocities they start from (for [`SoftBodyState::substep_advance`]).
+    fn substep_damping(&mut self, plan: &SubstepPlan, k: u32) {
         let hs = plan.hs;
         if plan.dampers {
             self.springs.damp(
@@ -618,18 +618,18 @@ impl SoftBodyState {
                 hs,
             );
         }
-        let drag = self.material.linear_damping;
-        if drag > 0.0 {
-            let keep = 1.0 / (1.0 + hs * drag);
-            for (v, &w) in self.velocities.iter_mut().zip(&self.inv_masses) {
-                if w > 0.0 {
-                    *v *= keep;
-                }
-            }
+        drag(
+            &mut self.velocities,
+            &self.inv_masses,
+            self.material.linear_damping,
+            hs,
+        );
+        if k == 0 {
+            let (x, v, m) = (&self.positions, &mut self.velocities, &self.masses);
+            let particles = (&x[..], &mut v[..], &m[..], &self.inv_masses[..]);
+            let h = hs * plan.substeps as f32;
+            damp_whole_body(&self.material, self.gravity, h, particles, &self.contacts);
         }
-        let (x, v, m) = (&self.positions, &mut self.velocities, &self.masses);
-        let particles = (&x[..], &mut v[..], &m[..], &self.inv_masses[..]);
-        damp_whole_body(&self.material, self.gravity, hs, particles, &self.contacts);
         if !plan.volumes {
             self.scratch
                 .substep_velocities
