@@ -222,7 +222,7 @@ fn xpbd_with_clusters_keeps_every_scene_under_one_percent() {
 
 /// Flesh, rubber and hard rubber bodies on the meshes other tools made, dropped with XPBD's
 /// cluster correction at 30, 60 and 120 Hz, come to rest and fall asleep within 4.5 s of
-/// landing (measured 1.5-4.1 s; the bouncy rubber bunny is the last). Without deformation
+/// landing (measured 1.6-3.9 s; the bouncy rubber bunny is the last). Without deformation
 /// damping and rolling resistance none slept within 8 s: they rocked on their curved
 /// undersides and their thin parts swung (PERFORMANCE.md, "Irregular bodies at rest").
 #[test]

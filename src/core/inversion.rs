@@ -18,13 +18,13 @@ const UNFOLDED: f32 = 0.1;
 const SWEEPS: usize = 8;
 
 /// Turns each tet left inside out back to a tenth of its rest volume ([`UNFOLDED`]), one at a
-/// time (a projection of that tet alone), sweeping the tets again while a sweep turned any (at most [`SWEEPS`]), and
-/// returns how many turns it made. Its particles are moved as the tet needs, even into what they
-/// touch (the next substep's contacts push them out): a tet lying on the ground must be able to
-/// lift its corners off it (PERFORMANCE.md, "Cluster volume correction"). What of their
-/// velocities would fold it again is taken out, as a contact takes out a velocity into what it
-/// touches: left in, it folded the tet in every step's substeps and kept the body moving for
-/// ever.
+/// time (a projection of that tet alone), sweeping the tets again while a sweep turned any (at
+/// most [`SWEEPS`]), and returns how many turns it made. Its particles are moved as the tet
+/// needs, even into what they touch (the next substep's contacts push them out): a tet lying on
+/// the ground must be able to lift its corners off it (PERFORMANCE.md, "Cluster volume
+/// correction"). What of their velocities would fold it again is taken out, as a contact takes
+/// out a velocity into what it touches: left in, it folded the tet in every step's substeps and
+/// kept the body moving for ever.
 pub(crate) fn turn_inverted_tets_back(
     mesh: &TetMesh,
     positions: &mut [Vec3],
