@@ -5,15 +5,15 @@
 //!
 //! The shape solve's damping is stiffness-proportional (`ElasticSettings::damping`): a mode of
 //! angular frequency `w` gets the damping ratio `beta w / 2`, so a slow wobble of a long body
-//! (a dragon's tail, a creature's neck) kept swinging for many seconds. Deformation damping at
+//! (a dragon's tail, a creature's neck) keeps swinging. Deformation damping at
 //! rate `alpha` gives each mode `alpha / (2 w)` more, the slow ones most, as Rayleigh's
 //! `alpha M + beta K` does; taken relative to the rigid motion, it leaves a body's flight and
 //! spin alone and keeps its momentum and angular momentum (Müller et al. 2007, "Position Based
 //! Dynamics", section 3.5, damps the same way). A stiff body resting on a curved underside
 //! (a bunny, a creature on its side) rocks as a rigid body, which no internal damping touches;
 //! a real one stops through the hysteresis of its contact patch, finer than the tets resolve,
-//! which rolling resistance stands for: a torque `c N r` against the rolling, about where the
-//! body touches, as for a wheel.
+//! which rolling resistance stands for: a torque `c N r` against the rolling, as for a wheel,
+//! applied about the centre of mass (friction at the contact turns it into a slower roll).
 
 use glam::{Mat3, Vec3};
 

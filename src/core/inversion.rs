@@ -8,9 +8,8 @@ use super::geometry::{signed_volume, volume_gradients};
 use super::tet_mesh::TetMesh;
 
 /// The share of its rest volume a tet is turned back to: just unfolded, the rest left to the
-/// volume constraints of the substeps that follow. Turned back to its whole rest volume at once,
-/// a sliver's corners jumped by a centimetre (a corner on the ground hopped off it), every step,
-/// and the body never fell asleep.
+/// volume constraints of the substeps that follow, so that a sliver's corners do not jump
+/// (PERFORMANCE.md, "Irregular bodies at rest").
 const UNFOLDED: f32 = 0.1;
 
 /// The most sweeps [`turn_inverted_tets_back`] makes: a first-order turn can leave a sliver
@@ -23,8 +22,7 @@ const SWEEPS: usize = 8;
 /// needs, even into what they touch (the next substep's contacts push them out): a tet lying on
 /// the ground must be able to lift its corners off it (PERFORMANCE.md, "Cluster volume
 /// correction"). What of their velocities would fold it again is taken out, as a contact takes
-/// out a velocity into what it touches: left in, it folded the tet in every step's substeps and
-/// kept the body moving for ever.
+/// out a velocity into what it touches, so that the next substeps do not fold it again.
 pub(crate) fn turn_inverted_tets_back(
     mesh: &TetMesh,
     positions: &mut [Vec3],
