@@ -262,11 +262,13 @@ pub(crate) fn refresh_shape_bundles(bundles: &mut [ShapeBundle], w: &[f32]) {
 /// One pass over the tets' shape constraints (see the module's doc), bundle by bundle: per
 /// tet the five deviatoric ones in turn, then the hydrostatic one. `compliance` is theirs
 /// per unit volume (see [`ElasticSettings::tet_compliance`]), `hs2` the squared substep,
-/// `gamma` XPBD's damping term; `x` the positions it moves, `start` the predicted positions at
-/// the start of the step. Needs `refresh_shape_bundles` this step.
+/// `gamma` XPBD's damping term; `start` the positions at the substep's start and `moves` how
+/// far each particle has moved since, which the projection moves (a particle's position is
+/// `start + moves`; see `SoftBodyState::substep_shape` for why it is kept apart). Needs
+/// `refresh_shape_bundles` this step.
 pub(crate) fn project_tet_shapes(
     bundles: &[ShapeBundle],
-    x: &mut [Vec3],
+    moves: &mut [Vec3],
     start: &[Point4],
     compliance: [f32; 2],
     hs2: f32,
@@ -278,7 +280,9 @@ pub(crate) fn project_tet_shapes(
     for b in bundles {
         let g = &b.gradients;
         // Written out, not mapped: a closure per lane was not inlined.
-        let corner = |[a, b, c, d]: [usize; LANES]| Vec3x4::from_vecs([x[a], x[b], x[c], x[d]]);
+        let moved = |[a, b, c, d]: [usize; LANES]| {
+            Vec3x4::from_vecs([moves[a], moves[b], moves[c], moves[d]])
+        };
         let start_corner = |[a, b, c, d]: [usize; LANES]| {
             Vec3x4::from_rows([
                 start[a].row(),
@@ -288,7 +292,6 @@ pub(crate) fn project_tet_shapes(
             ])
         };
         let [l0, l1, l2, l3] = b.corners;
-        let mut f = Mat3x4::deformation(&[corner(l0), corner(l1), corner(l2), corner(l3)], g);
         let f_start = Mat3x4::deformation(
             &[
                 start_corner(l0),
@@ -298,6 +301,10 @@ pub(crate) fn project_tet_shapes(
             ],
             g,
         );
+        // `F` is linear in the corners: the start's plus the moves'.
+        let mut f = f_start;
+        let f_moves = Mat3x4::deformation(&[moved(l0), moved(l1), moved(l2), moved(l3)], g);
+        f.add_scaled(&f_moves, f32x4::ONE);
         // Each constraint's compliance over `h_s^2`; infinite in an empty lane, whose
         // multipliers are then zero (and its corners have no mass).
         let scaled = b.rest_volume * f32x4::splat(hs2);
@@ -323,11 +330,12 @@ pub(crate) fn project_tet_shapes(
         let cofactor = f.cofactor();
         let det = f.0[0].dot(cofactor.0[0]);
         project(cofactor, det - f32x4::ONE, &mut f, hydrostatic);
-        let moves: [[Vec3; LANES]; 4] =
+        let corrections: [[Vec3; LANES]; 4] =
             std::array::from_fn(|k| total.mul_vec(g[k]).scale(b.inv_masses[k]).to_vecs());
-        for (corners, moves) in b.corners.iter().zip(&moves) {
-            for ((&i, &dx), _) in corners.iter().zip(moves).zip(b.filled).filter(|(_, f)| *f) {
-                x[i] += dx;
+        for (corners, corrections) in b.corners.iter().zip(&corrections) {
+            let each = corners.iter().zip(corrections).zip(b.filled);
+            for ((&i, &dx), _) in each.filter(|(_, f)| *f) {
+                moves[i] += dx;
             }
         }
     }
@@ -396,14 +404,18 @@ mod tests {
         }
         refresh_shape_bundles(&mut body.scratch.shape_bundles, &body.inv_masses);
         let before = body.volume_metrics().volume as f32;
+        let mut moves = vec![Vec3::ZERO; 4];
         project_tet_shapes(
             &body.scratch.shape_bundles,
-            &mut body.positions,
+            &mut moves,
             &body.scratch.predicted,
             compliance,
             1e-4,
             0.0,
         );
+        for (x, dx) in body.positions.iter_mut().zip(&moves) {
+            *x += *dx;
+        }
         (body, before)
     }
 

@@ -68,7 +68,7 @@ pub use snapshot::{MeshFingerprint, SNAPSHOT_VERSION, SnapshotError, StateSnapsh
 pub(crate) use soft_broad_phase::PairRounds;
 pub use soft_lockstep::step_bodies;
 pub(crate) use soft_lockstep::{LockstepBody, final_contacts_together, substeps_together};
-pub use substep::{Stage, SubstepStage};
+pub use substep_plan::{Stage, SubstepStage};
 pub use surface_mesh::{TriangleSurface, subdivided_box, surface_nets, torus, uv_sphere};
 pub use tearing::{Tear, TearSettings, cut_faces, pieces};
 pub use tet_mesh::{Blocks, ParticleRegion, TetMesh, TetMeshError};

@@ -37,9 +37,10 @@ use super::boundary::{
     Boundary, CandidateParticle, SoftCandidates, TriangleGrid, closest_barycentric,
 };
 use super::colliders::combined_friction;
-use super::contacts::MAX_DEPENETRATION_SPEED;
+use super::contacts::{ContactState, MAX_DEPENETRATION_SPEED};
 use super::impulses::SOFT_CONTACT;
 use super::lanes::Point4;
+use super::material::VolumeMethod;
 use super::parallel::SharedSlice;
 use super::parallel::{Parallel, for_each_mut};
 use super::soft_broad_phase::{PairRounds, boundary_bounds, overlap, prepare_soft_contacts};
@@ -78,6 +79,32 @@ fn record_soft_contacts(body: &mut SoftBodyState) {
         let (i, n) = body.scratch.soft_touched[k];
         body.contacts.record(i as usize, n, 0.0, None);
         body.contacts.sphere[i as usize] = SOFT_CONTACT;
+    }
+}
+
+/// Records, for XPBD's cluster correction, the corners of the triangles that `supports` (a
+/// substep pass's new ones) met as touching the other body's particle, in `contacts` (the
+/// triangles' body, of volume method `method`): the correction, which runs on the positions
+/// after the last substep, pushes neither side of a contact into the other. Without the
+/// corners, it pushed a triangle's side a centimetre into the body that had just been moved
+/// out of it, which the step's final pass, one particle at a time, could not undo. The paper's
+/// impulses keep their own rule (only the particle side is constrained; its push is handed to
+/// the triangle, `soft_records.rs`).
+fn record_soft_corners(
+    supports: &[SoftSupport],
+    contacts: &mut ContactState,
+    method: VolumeMethod,
+) {
+    if !matches!(method, VolumeMethod::Xpbd(s) if s.clusters > 0) {
+        return;
+    }
+    for s in supports {
+        for (&c, &b) in s.corners.iter().zip(s.weights.as_ref()) {
+            if b > 0.0 {
+                contacts.record(c as usize, -s.normal, 0.0, None);
+                contacts.sphere[c as usize] = SOFT_CONTACT;
+            }
+        }
     }
 }
 
@@ -237,6 +264,7 @@ fn resolve_pair(
     let (ta, tb) = (&mut a.scratch.soft_touched, &mut b.scratch.soft_touched);
     ta.clear();
     tb.clear();
+    let new_supports = (a.scratch.soft_supports.len(), b.scratch.soft_supports.len());
     let contact_a = Contact {
         phase,
         thickness,
@@ -272,6 +300,17 @@ fn resolve_pair(
     b.scratch.soft_supports = contact_b.supports.into_inner();
     record_soft_contacts(a);
     record_soft_contacts(b);
+    let (method_a, method_b) = (a.material.method, b.material.method);
+    record_soft_corners(
+        &a.scratch.soft_supports[new_supports.0..],
+        &mut b.contacts,
+        method_b,
+    );
+    record_soft_corners(
+        &b.scratch.soft_supports[new_supports.1..],
+        &mut a.contacts,
+        method_a,
+    );
     // A sleeping body touched by an awake one is stirred (it wakes, its quiet time kept: if
     // it stays still, it sleeps again with the last of its neighbours; see `Sleep::stir`);
     // two sleeping ones stay as they are.
@@ -348,6 +387,7 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
     };
     let touched = &mut body.scratch.soft_touched;
     touched.clear();
+    let new_supports = body.scratch.soft_supports.len();
     let contacts = contact.particles_against_triangles(
         &arrays,
         &boundary.triangles,
@@ -358,13 +398,11 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
     );
     body.scratch.soft_supports = contact.supports.into_inner();
     record_soft_contacts(body);
+    let supports = &body.scratch.soft_supports[new_supports..];
+    record_soft_corners(supports, &mut body.contacts, body.material.method);
     contacts
 }
 
-/// Where `xp` is against the triangle `corners` (outward by its winding): its signed distance
-/// to the surface, the direction that pushes it out, and the barycentric weights of the
-/// nearest point. Over the triangle the distance is along the normal; off past an edge or
-/// corner on the outer side it is the distance to that edge or corner, pushed away from it.
 /// A particle found inside a triangle: what both passes' responses need.
 #[derive(Clone, Copy)]
 struct Touch {
@@ -382,19 +420,28 @@ struct Touch {
     w_t: f32,
 }
 
-/// `None` for a degenerate triangle.
-fn surface_distance(xp: Vec3, corners: [Vec3; 3]) -> Option<(f32, Vec3, Vec3)> {
+/// The signed distance of `xp` past the triangle `corners` (negative inside), the direction
+/// that takes it out, and the barycentric weights of its nearest point; `None` for a
+/// degenerate triangle. Over the triangle, the distance along its outward normal. Nearest to
+/// one of its edges or corners, the particle is outside (infinitely far: another triangle
+/// decides) unless it lies behind the triangle's plane: then it is inside a dent (a concave
+/// edge or corner, as an impact leaves) or under the edge between two triangles of a flat
+/// face, and comes out to that nearest point. Without this, a particle pushed behind a dent's
+/// edge was seen by no triangle and ended the step a centimetre inside the other body.
+fn surface_distance(xp: Vec3, corners: [Vec3; 3], dents: bool) -> Option<(f32, Vec3, Vec3)> {
     let [a, b, c] = corners;
     let n = (b - a).cross(c - a).try_normalize()?;
     let q = closest_barycentric(xp, a, b, c);
     let offset = xp - (a * q.x + b * q.y + c * q.z);
     let distance = offset.length();
     let over = (offset - n * offset.dot(n)).length_squared() <= 1e-12 * (1.0 + distance);
-    if !over {
-        return Some((f32::INFINITY, n, q));
+    if over {
+        return Some((offset.dot(n), n, q));
     }
-    let _ = distance;
-    Some((offset.dot(n), n, q))
+    if dents && offset.dot(n) < 0.0 {
+        return Some((-distance, -offset / distance, q));
+    }
+    Some((f32::INFINITY, n, q))
 }
 
 /// The part of a predicted penetration `depth` to remove within a step of `h`: all that the
@@ -554,7 +601,7 @@ impl Contact {
         let now = corners.map(|j| t.x.get(j));
         let end = corners.map(|j| t.x.get(j) + ahead * t.v.get(j));
         let was_outside = outside_of(x, now, thickness);
-        let (d, n, q) = surface_distance(xp, end)?;
+        let (d, n, q) = surface_distance(xp, end, self.phase == SoftContactPhase::Final)?;
         if d >= thickness || (d < -reach && !was_outside) {
             return None;
         }
@@ -577,8 +624,8 @@ impl Contact {
             // pass does, not shot out at its depth over the substep; what the substep's
             // impulses left within the gap is undone whole.
             let start = corners.map(|j| t.start[j].vec3());
-            let existing =
-                surface_distance(p.start[i].vec3(), start).map_or(0.0, |(d0, ..)| -d0 - thickness);
+            let existing = surface_distance(p.start[i].vec3(), start, false)
+                .map_or(0.0, |(d0, ..)| -d0 - thickness);
             depth = bounded_correction(depth, existing, hs);
         }
         let touch = Touch {
@@ -711,7 +758,7 @@ impl Contact {
         let relative = || p.v.get(i) - (0..3).map(|k| q[k] * t.v.get(corners[k])).sum::<Vec3>();
         let normal_impulse = match self.phase {
             SoftContactPhase::Predicted(h) => {
-                let existing = surface_distance(x, now).map_or(0.0, |(d_now, ..)| -d_now);
+                let existing = surface_distance(x, now, false).map_or(0.0, |(d_now, ..)| -d_now);
                 let lambda = bounded_correction(depth, existing, h) / h / w;
                 push(n * lambda);
                 lambda

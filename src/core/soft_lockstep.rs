@@ -14,8 +14,8 @@ use super::colliders::{ColliderInstance, RigidSphereState};
 use super::parallel::{Parallel, Serial, for_each_mut};
 use super::soft_broad_phase::{PairRounds, candidates_hold, gather_soft_candidates};
 use super::soft_contacts::{SoftContactPhase, soft_contact_pass};
-use super::substep::SubstepStage;
 use super::substep_plan::SubstepPlan;
+use super::substep_plan::SubstepStage;
 
 /// Applies the pushes every body's volume impulses handed on this substep to the other bodies'
 /// triangles, each with Coulomb friction for its normal part on the particle's slip over the

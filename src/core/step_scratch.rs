@@ -33,6 +33,9 @@ pub(crate) struct StepScratch {
     pub(crate) chunk_findings: Vec<ChunkFindings>,
     /// Velocities before a substep's volume impulses (see `substep.rs`).
     pub(crate) substep_velocities: Vec<Vec3>,
+    /// How far each particle moved in a substep's shape solve, from its start (`predicted`);
+    /// see `SoftBodyState::substep_shape`.
+    pub(crate) shape_moves: Vec<Vec3>,
     /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
     pub(crate) shape_bundles: Vec<ShapeBundle>,
     /// This step's substeps, from their plan to the step's finish (`substep.rs`).
@@ -80,6 +83,7 @@ impl StepScratch {
             soft_count: 0,
             clusters: ClusterVolumes::default(),
             substep_velocities: vec![Vec3::ZERO; n],
+            shape_moves: vec![Vec3::ZERO; n],
             shape_bundles: shape_bundles(mesh),
         }
     }

@@ -52,24 +52,13 @@ use super::lanes::Point4;
 use super::material::{Elasticity, VolumeMethod};
 use super::parallel::{Parallel, Serial};
 use super::soft_records::{hand_soft_pushes, take_soft_pushes};
-use super::substep_plan::SubstepPlan;
+use super::substep_plan::{
+    Stage, SubstepPlan, SubstepStage, spheres_after_bodies, spheres_before_bodies,
+};
 use super::tearing::{crack_crossed, largest_strain, split_particles, tear_mesh};
 use super::xpbd::{EdgeConstraints, project_edges, project_volume_bundles};
 use parry3d::bounding_volume::BoundingVolume;
 use parry3d::query::Ray;
-
-/// A stage of a step, in the order [`Stage::ORDER`]; see the module's documentation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Stage {
-    /// The explicit springs' forces and gravity; kinematic particles set moving.
-    Forces,
-    /// The substeps: shape, contacts, the volume passes, `x += h_s v`.
-    Substeps,
-    /// The plastic springs' flow.
-    Plasticity,
-    /// Sleep, the runaway check, the spheres' last contacts and motion.
-    Finish,
-}
 
 /// The longest substep of a physical material under the volume impulses that touched another
 /// soft body in the last step. Such a body carries others or rests on them, and its volume
@@ -78,42 +67,6 @@ pub enum Stage {
 /// over 1 % at its motion's 5 substeps of 1/300 s; `PERFORMANCE.md`, "Soft bodies in a
 /// pile").
 pub(crate) const TOUCHING_MAX_SUBSTEP: f32 = 1.0 / 600.0;
-
-impl Stage {
-    /// The stages in the order a step runs them.
-    pub const ORDER: [Stage; 4] = [
-        Stage::Forces,
-        Stage::Substeps,
-        Stage::Plasticity,
-        Stage::Finish,
-    ];
-}
-
-/// A stage of a substep, in the order [`SubstepStage::ORDER`]; see the module's documentation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum SubstepStage {
-    /// Gravity, the predicted positions, the shape solve.
-    Shape,
-    /// The velocities from the shape solve, then the contacts.
-    Contacts,
-    /// Damping, then the one-ring volume impulses (section 5).
-    OneRing,
-    /// The per-tet volume impulses scaled by gamma, with the neighbour clamp (section 4).
-    PerTet,
-    /// `x += h_s v`.
-    Advance,
-}
-
-impl SubstepStage {
-    /// The stages in the order a substep runs them.
-    pub const ORDER: [SubstepStage; 5] = [
-        SubstepStage::Shape,
-        SubstepStage::Contacts,
-        SubstepStage::OneRing,
-        SubstepStage::PerTet,
-        SubstepStage::Advance,
-    ];
-}
 
 impl SoftBodyState {
     /// A whole step without colliders or spheres: for tests and benchmarks of the core.
@@ -477,31 +430,32 @@ impl SoftBodyState {
             }
             SubstepStage::Advance => {
                 self.substep_advance(plan);
-                let (x, v, w) = (&mut self.positions, &mut self.velocities, &self.inv_masses);
-                match self.material.method {
-                    _ if k + 1 < plan.substeps => {}
-                    VolumeMethod::Xpbd(s) if s.clusters > 0 => {
-                        let (n, kept) = (&self.contacts.normals, &self.contacts.kept);
-                        let clusters = &mut self.scratch.clusters;
-                        correct_cluster_volumes(
-                            clusters,
-                            s.clusters,
-                            &self.mesh,
-                            (x, v, w),
-                            n,
-                            kept,
-                        );
-                    }
-                    VolumeMethod::Impulses(_) => {
-                        turn_inverted_tets_back(&self.mesh, x, v, w);
-                    }
-                    _ => {}
+                if k + 1 == plan.substeps {
+                    self.last_substep_corrections();
                 }
                 0
             }
         };
         self.scratch.substep_clock.stop(stage as usize, started);
         contacts
+    }
+
+    /// After a step's last substep: XPBD's cluster correction (`clusters.rs`, which turns
+    /// tets left inside out back), or for the paper's impulses the tets left inside out turned
+    /// back (`inversion.rs`).
+    fn last_substep_corrections(&mut self) {
+        let (x, v, w) = (&mut self.positions, &mut self.velocities, &self.inv_masses);
+        match self.material.method {
+            VolumeMethod::Xpbd(s) if s.clusters > 0 => {
+                let clusters = &mut self.scratch.clusters;
+                let (mesh, contacts) = (&self.mesh, &self.contacts);
+                correct_cluster_volumes(clusters, s.clusters, mesh, (x, v, w), contacts);
+            }
+            VolumeMethod::Impulses(_) => {
+                turn_inverted_tets_back(&self.mesh, x, v, w);
+            }
+            _ => {}
+        }
     }
 
     /// The particles against the spheres, the rigid bodies of another engine, then the static
@@ -528,26 +482,28 @@ impl SoftBodyState {
         for body in &mut self.rigid.bodies {
             body.linear_velocity += hs * body.gravity;
         }
-        // Predict; `predicted` holds where each particle started the substep.
+        // Predict: `predicted` holds where each particle started the substep, `shape_moves`
+        // how far it has moved since, which the shape solve moves. Kept apart from the
+        // positions, so that the velocities are the moves over `h_s`, exactly: from positions
+        // (`(x - start) / h_s` in `f32`, far from the origin) every constraint's write rounded
+        // into them, and a body at rest on ice crept 2 cm in 8 s near the origin, 24 cm at 4 m.
+        let (start, moves) = (&mut self.scratch.predicted, &mut self.scratch.shape_moves);
         for i in 0..self.positions.len() {
             if self.inv_masses[i] > 0.0 {
                 self.velocities[i] += hs * gravity;
             }
-            self.scratch.predicted[i] = Point4::new(self.positions[i]);
-            self.positions[i] += hs * self.velocities[i];
+            start[i] = Point4::new(self.positions[i]);
+            moves[i] = hs * self.velocities[i];
         }
         match plan.tet_compliance {
-            Some(compliance) => project_tet_shapes(
-                &self.scratch.shape_bundles,
-                &mut self.positions,
-                &self.scratch.predicted,
-                compliance,
-                hs * hs,
-                plan.shape_damping,
-            ),
+            Some(compliance) => {
+                let bundles = &self.scratch.shape_bundles;
+                let damping = plan.shape_damping;
+                project_tet_shapes(bundles, moves, start, compliance, hs * hs, damping);
+            }
             None => project_edges(
-                &mut self.positions,
-                &self.scratch.predicted,
+                moves,
+                start,
                 &self.mesh,
                 &self.inv_masses,
                 EdgeConstraints {
@@ -559,24 +515,36 @@ impl SoftBodyState {
             ),
         }
         if plan.volumes {
-            project_volume_bundles(&self.scratch.shape_bundles, &mut self.positions);
+            project_volume_bundles(&self.scratch.shape_bundles, moves, start);
+        }
+        for ((x, s), m) in self
+            .positions
+            .iter_mut()
+            .zip(start.iter())
+            .zip(moves.iter())
+        {
+            *x = s.vec3() + *m;
         }
     }
 
-    /// The velocities the substep's shape solve gives (where it, and the contacts between
-    /// bodies stepped together, took the particles), with the particles back where the
-    /// substep started.
+    /// The velocities the substep's shape solve gives (its moves, and where the contacts
+    /// between bodies stepped together took the particles after it), with the particles back
+    /// where the substep started.
     fn substep_velocities(&mut self, plan: &SubstepPlan) {
         let hs = plan.hs;
+        let (start, moves) = (&self.scratch.predicted, &self.scratch.shape_moves);
         for i in 0..self.positions.len() {
-            let v = (self.positions[i] - self.scratch.predicted[i].vec3()) / hs;
+            let start = start[i].vec3();
+            // Zero but where a contact between bodies moved the particle.
+            let contact = self.positions[i] - (start + moves[i]);
+            let v = (moves[i] + contact) / hs;
             if v.is_finite() {
                 self.velocities[i] = v;
             } else {
                 self.velocities[i] = Vec3::ZERO;
                 self.counters.non_finite_velocities += 1;
             }
-            self.positions[i] = self.scratch.predicted[i].vec3();
+            self.positions[i] = start;
         }
     }
 
@@ -766,35 +734,5 @@ impl SoftBodyState {
     /// The seconds this body spent in each [`SubstepStage`] since the last call.
     pub(crate) fn take_substep_seconds(&mut self) -> [f64; 5] {
         std::mem::take(&mut self.scratch.substep_clock.seconds)
-    }
-}
-
-/// The spheres' part of `stage` that comes before the bodies': their gravity with the
-/// forces, their contacts with the static colliders before the substeps and again at the
-/// finish (after the particles pushed them).
-pub fn spheres_before_bodies(
-    stage: Stage,
-    h: f32,
-    gravity: Vec3,
-    spheres: &mut [RigidSphereState],
-    colliders: &[ColliderInstance],
-) {
-    for sphere in spheres {
-        match stage {
-            Stage::Forces => sphere.apply_forces(h, gravity),
-            Stage::Substeps | Stage::Finish => {
-                sphere.resolve_static_contacts(h, colliders);
-            }
-            Stage::Plasticity => {}
-        }
-    }
-}
-
-/// The spheres' part of `stage` that comes after the bodies': `x += h v` at the finish.
-pub fn spheres_after_bodies(stage: Stage, h: f32, spheres: &mut [RigidSphereState]) {
-    if stage == Stage::Finish {
-        for sphere in spheres {
-            sphere.integrate_position(h);
-        }
     }
 }

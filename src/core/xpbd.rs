@@ -39,17 +39,17 @@ pub(crate) struct EdgeConstraints<'a> {
     pub(crate) compliance: &'a [f32],
 }
 
-/// One Gauss-Seidel pass over the edge constraints of `mesh` on the positions `x` (from
-/// `start`, where the substep began), each of compliance `compliance / hs2` (`hs2` the squared
+/// One Gauss-Seidel pass over the edge constraints of `mesh` on the positions
+/// `start + moves` (`start` where the substep began, `moves` what the pass moves), each of compliance `compliance / hs2` (`hs2` the squared
 /// substep), in the blocks' order of the springs (see
 /// [`Blocks::edges`](super::tet_mesh::Blocks::edges)): the same order the other methods'
 /// dampers take, where consecutive constraints share no particle and do not wait for each
 /// other's results. An edge of zero stiffness (infinite compliance) is skipped. `gamma` is
 /// XPBD's damping term (see the module's doc): the projection is
-/// `dlambda = -(C + gamma grad C . (x - x_start)) / ((1 + gamma) w / L0^2 + alpha)`, the
+/// `dlambda = -(C + gamma grad C . moves) / ((1 + gamma) w / L0^2 + alpha)`, the
 /// undamped one when it is zero.
 pub(crate) fn project_edges(
-    x: &mut [Vec3],
+    moves: &mut [Vec3],
     start: &[Point4],
     mesh: &TetMesh,
     inv_masses: &[f32],
@@ -67,7 +67,7 @@ pub(crate) fn project_edges(
         if wi + wj == 0.0 || !alpha.is_finite() {
             continue;
         }
-        let d = x[j] - x[i];
+        let d = (start[j].vec3() - start[i].vec3()) + (moves[j] - moves[i]);
         let length = d.length();
         let rest = edges.rest[e];
         if length <= f32::EPSILON * rest {
@@ -76,14 +76,14 @@ pub(crate) fn project_edges(
         let n = d / length;
         let c = (length - rest) / rest;
         let lambda = if gamma > 0.0 {
-            let rate = n.dot((x[j] - start[j].vec3()) - (x[i] - start[i].vec3())) / rest;
+            let rate = n.dot(moves[j] - moves[i]) / rest;
             -(c + gamma * rate) / ((1.0 + gamma) * (wi + wj) / (rest * rest) + alpha)
         } else {
             -c / ((wi + wj) / (rest * rest) + alpha)
         };
         let push = n * (lambda / rest);
-        x[i] -= push * wi;
-        x[j] += push * wj;
+        moves[i] -= push * wi;
+        moves[j] += push * wj;
     }
 }
 
@@ -91,13 +91,18 @@ pub(crate) fn project_edges(
 /// tets at a time: the tets of a bundle share no particle, so each lane is its tet's own
 /// projection, and the bundles come in index order (each takes the next tets free of its first
 /// one's particles; `deviatoric::shape_bundles`), so the sweep is Gauss-Seidel in nearly index
-/// order. Needs `refresh_shape_bundles` this step (the inverse masses).
-pub(crate) fn project_volume_bundles(bundles: &[ShapeBundle], x: &mut [Vec3]) {
+/// order, on the positions `start + moves`, moving `moves`. Needs `refresh_shape_bundles`
+/// this step (the inverse masses).
+pub(crate) fn project_volume_bundles(
+    bundles: &[ShapeBundle],
+    moves: &mut [Vec3],
+    start: &[Point4],
+) {
     let sixth = f32x4::splat(1.0 / 6.0);
     for b in bundles {
         let [a, bb, c, d] = b
             .corners
-            .map(|lanes| Vec3x4::from_vecs(lanes.map(|i| x[i])));
+            .map(|lanes| Vec3x4::from_vecs(lanes.map(|i| start[i].vec3() + moves[i])));
         let g_a = (bb - d).cross(c - d).scale(sixth);
         let g_b = (c - d).cross(a - d).scale(sixth);
         let g_c = (a - d).cross(bb - d).scale(sixth);
@@ -111,10 +116,10 @@ pub(crate) fn project_volume_bundles(bundles: &[ShapeBundle], x: &mut [Vec3]) {
         let step = (b.rest_volume - volume) / denominator;
         let step = step.is_finite().blend(step, f32x4::ZERO);
         for k in 0..4 {
-            let moves = g[k].scale(w[k] * step).to_vecs();
+            let corrections = g[k].scale(w[k] * step).to_vecs();
             for l in 0..LANES {
                 if b.filled[l] {
-                    x[b.corners[k][l]] += moves[l];
+                    moves[b.corners[k][l]] += corrections[l];
                 }
             }
         }

@@ -18,7 +18,7 @@ use crate::components::{
     SoftBodySleepThreshold, SoftBodySleepingDisabled, SoftBodyStats, SoftBodyTearing, SoftBodyTorn,
     StaticCollider,
 };
-use crate::core::substep::{spheres_after_bodies, spheres_before_bodies};
+use crate::core::substep_plan::{spheres_after_bodies, spheres_before_bodies};
 use crate::core::{
     BodyPoint, ColliderInstance, CollisionFilter, Parallel, RigidBodyMotion, RigidSphereState,
     Serial, SoftBodyState,
