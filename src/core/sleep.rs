@@ -56,6 +56,10 @@ pub(crate) struct Sleep {
     still_at: Vec<Vec3>,
     /// Whether the body is asleep.
     pub(crate) asleep: bool,
+    /// Whether it fell asleep at the end of the last step: the step's last contacts between
+    /// bodies still meet it (`soft_contacts.rs`), or what that step's end pushed into a
+    /// neighbour falling asleep with it would stay there.
+    pub(crate) fell_asleep_now: bool,
     /// While asleep: its bounds grown by the reach, the gravity it fell asleep in, and a
     /// fingerprint of the colliders within the bounds (`None` for a body restored asleep from
     /// a snapshot: the colliders it meets at its first step are the ones it sleeps among, as
@@ -125,6 +129,7 @@ impl Sleep {
         spheres: &[RigidSphereState],
         colliders: &[ColliderInstance],
     ) -> bool {
+        self.fell_asleep_now = false;
         if !self.asleep {
             return false;
         }
@@ -199,6 +204,7 @@ impl Sleep {
             return false;
         }
         self.asleep = true;
+        self.fell_asleep_now = true;
         self.bounds = Some(bounds);
         self.gravity = gravity;
         self.colliders = Some(colliders_near(&bounds, colliders));

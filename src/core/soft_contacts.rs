@@ -237,9 +237,9 @@ fn resolve_pair(
     let (Some(sa), Some(sb)) = (a.soft_contacts, b.soft_contacts) else {
         return 0;
     };
-    if (a.is_sleeping() && b.is_sleeping())
-        || !a.collision_filter.interacts_with(b.collision_filter)
-    {
+    // Two bodies asleep are left alone, but for the pass that ends the step they fell asleep in.
+    let dozing = |body: &SoftBodyState| body.is_sleeping() && !body.sleep.fell_asleep_now;
+    if (dozing(a) && dozing(b)) || !a.collision_filter.interacts_with(b.collision_filter) {
         return 0;
     }
     let thickness = sa.thickness.max(sb.thickness);
