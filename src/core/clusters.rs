@@ -22,8 +22,8 @@
 //! It runs once a step, after the last substep, on the positions: the velocities keep what the
 //! substeps gave them, so the correction adds no energy (it is a projection of where the step
 //! ends, as XPBD's own constraints are), but for a tet turned back, whose corners lose what of
-//! their velocities would fold it again. Run before the last substep instead, that substep
-//! undid much of it (a jelly's peak rose from 0.5 to 1.2-1.9 %). Nothing moves what the body
+//! their velocities would fold it again. (Run before the last substep instead, that substep's
+//! sweep gave much of the loss back.) Nothing moves what the body
 //! touches after it, so a particle touching anything (the ground, a rigid body, another soft
 //! body, or whose triangle another body's particle touches) is not pushed into it at all. Measured against the alternatives (in every
 //! substep, on the velocities, with more clusters, the rings solved together by conjugate
@@ -253,8 +253,8 @@ pub(crate) fn correct_cluster_volumes(
 
 /// `a` at particle `i` without what would push it into what it touches (`contacts`): all of
 /// it for a particle that touched another body this step, soft or rigid (held where it is, as
-/// the other soft body's particles that touch it are: pushed along that body's surface it went
-/// into the next triangle, and thrown jellies ended steps a centimetre inside each other); else
+/// the other soft body's particles that touch it are: pushed along that body's surface it goes
+/// into the next triangle); else
 /// the part along the contact's normal, and along a second static collider's (the edge or
 /// corner of a room): the particle slides along what it touches. Nothing moves what it
 /// touches after the correction, so no share of a push into it is kept.

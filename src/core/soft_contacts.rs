@@ -85,9 +85,8 @@ fn record_soft_contacts(body: &mut SoftBodyState) {
 /// Records, for XPBD's cluster correction, the corners of the triangles that `supports` (a
 /// substep pass's new ones) met as touching the other body's particle, in `contacts` (the
 /// triangles' body, of volume method `method`): the correction, which runs on the positions
-/// after the last substep, pushes neither side of a contact into the other. Without the
-/// corners, it pushed a triangle's side a centimetre into the body that had just been moved
-/// out of it, which the step's final pass, one particle at a time, could not undo. The paper's
+/// after the last substep, pushes neither side of a contact into the other (what it pushes
+/// in, the step's final pass, one particle at a time, may not undo). The paper's
 /// impulses keep their own rule (only the particle side is constrained; its push is handed to
 /// the triangle, `soft_records.rs`).
 fn record_soft_corners(
@@ -426,8 +425,9 @@ struct Touch {
 /// one of its edges or corners, the particle is outside (infinitely far: another triangle
 /// decides) unless it lies behind the triangle's plane: then it is inside a dent (a concave
 /// edge or corner, as an impact leaves) or under the edge between two triangles of a flat
-/// face, and comes out to that nearest point. Without this, a particle pushed behind a dent's
-/// edge was seen by no triangle and ended the step a centimetre inside the other body.
+/// face, and comes out to that nearest point. Only with `dents` (the final pass): the
+/// substeps, which ease a particle placed inside another body out at a bounded speed, let such
+/// particles out faster than that.
 fn surface_distance(xp: Vec3, corners: [Vec3; 3], dents: bool) -> Option<(f32, Vec3, Vec3)> {
     let [a, b, c] = corners;
     let n = (b - a).cross(c - a).try_normalize()?;

@@ -484,9 +484,9 @@ impl SoftBodyState {
         }
         // Predict: `predicted` holds where each particle started the substep, `shape_moves`
         // how far it has moved since, which the shape solve moves. Kept apart from the
-        // positions, so that the velocities are the moves over `h_s`, exactly: from positions
-        // (`(x - start) / h_s` in `f32`, far from the origin) every constraint's write rounded
-        // into them, and a body at rest on ice crept 2 cm in 8 s near the origin, 24 cm at 4 m.
+        // positions, so that the velocities are the moves over `h_s`, exactly: taken from the
+        // positions (`(x - start) / h_s` in `f32`), every constraint's write rounded into them,
+        // more the further from the origin, and a body at rest on ice crept.
         let (start, moves) = (&mut self.scratch.predicted, &mut self.scratch.shape_moves);
         for i in 0..self.positions.len() {
             if self.inv_masses[i] > 0.0 {
