@@ -23,11 +23,11 @@
 //! substeps gave them, so the correction adds no energy (it is a projection of where the step
 //! ends, as XPBD's own constraints are), but for a tet turned back, whose corners lose what of
 //! their velocities would fold it again. (Run before the last substep instead, that substep's
-//! sweep gave much of the loss back.) Nothing moves what the body
-//! touches after it, so a particle touching anything (the ground, a rigid body, another soft
-//! body, or whose triangle another body's particle touches) is not pushed into it at all. Measured against the alternatives (in every
-//! substep, on the velocities, with more clusters, the rings solved together by conjugate
-//! gradients) in PERFORMANCE.md, "Cluster volume correction".
+//! sweep gave much of the loss back.) Nothing moves what the body touches after it, so a
+//! particle touching anything (the ground, a rigid body, another soft body, or whose triangle
+//! another body's particle touches) is not pushed into it at all. Measured against the
+//! alternatives (in every substep, on the velocities, with more clusters, the rings solved
+//! together by conjugate gradients) in PERFORMANCE.md, "Cluster volume correction".
 
 use glam::Vec3;
 
@@ -131,10 +131,11 @@ impl ClusterVolumes {
     }
 
     /// Moves `positions` so that every cluster has its rest volume (to first order), particles
-    /// of inverse mass `inv_masses`, those touching something (`walls`) not pushed into it. Tets left inside out are turned back
-    /// first; if the correction's push folds one again, it is turned back and the clusters
-    /// corrected once more (a sliver's turn changes its cluster's volume), and what that second
-    /// push folds is turned back last (a sliver's volume, too small to correct for again).
+    /// of inverse mass `inv_masses`, those touching something (`contacts`) not pushed into it.
+    /// Tets left inside out are turned back first; if the correction's push folds one again, it
+    /// is turned back and the clusters corrected once more (a sliver's turn changes its
+    /// cluster's volume), and what that second push folds is turned back last (a sliver's
+    /// volume, too small to correct for again).
     pub(crate) fn correct(
         &mut self,
         mesh: &TetMesh,
@@ -254,10 +255,11 @@ pub(crate) fn correct_cluster_volumes(
 /// `a` at particle `i` without what would push it into what it touches (`contacts`): all of
 /// it for a particle that touched another body this step, soft or rigid (held where it is, as
 /// the other soft body's particles that touch it are: pushed along that body's surface it goes
-/// into the next triangle); else
-/// the part along the contact's normal, and along a second static collider's (the edge or
-/// corner of a room): the particle slides along what it touches. Nothing moves what it
-/// touches after the correction, so no share of a push into it is kept.
+/// into the next triangle); else the part along the contact's normal, and along a second
+/// static collider's (the edge or corner of a room): the particle slides along what it
+/// touches. Nothing moves what it touches after the correction, so no share of a push into it
+/// is kept. Both ways along the normals, not only into them as the impulses'
+/// `constrained_push`: `W` must stay linear for `G W G^T` to be the system's matrix.
 fn without_contact(contacts: &ContactState, i: usize, a: Vec3) -> Vec3 {
     if contacts.touched_a_body(i) {
         return Vec3::ZERO;

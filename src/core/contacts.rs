@@ -449,8 +449,8 @@ mod tests {
     /// they are: with velocity-only friction the rubber cube crept along, pushed by its own
     /// volume impulses (PERFORMANCE.md). On ice (no friction) nothing pushes it
     /// either: the volume passes and the shape solve conserve momentum, with either volume
-    /// method, and 100 m from the origin too (the shape solve's velocities came from `f32`
-    /// positions there, whose rounding walked the cube 2 cm in 8 s near the origin).
+    /// method, and 100 m from the origin too, where `f32` positions round coarsest (the shape
+    /// solve's velocities are its moves, not differences of positions).
     #[test]
     fn a_resting_body_does_not_walk_across_the_ground() {
         let (near, far) = (Vec3::ZERO, Vec3::new(100.0, 0.0, -100.0));
