@@ -259,7 +259,7 @@ fn gather_avian(
                     (rotation.0 * local.rotation.0).normalize(),
                 );
                 let motion = &avian.start[k as usize];
-                let end = motion.advance(&pose, h).0;
+                let end = motion.advance(&pose, 0.0, h).0;
                 let bounds = shape.compute_aabb(&pose).merged(&shape.compute_aabb(&end));
                 avian.colliders.push((
                     RigidCollider {
@@ -418,12 +418,20 @@ impl SoftBodyAttachment {
     }
 }
 
-/// Adds each dynamic body's change of velocity over the soft step to avian's velocities.
+/// Adds each dynamic body's change of velocity over the soft step to avian's velocities, and
+/// moves the body by its `position_correction` and `rotation_correction` (about its centre of
+/// mass): avian then moves it at its new velocity over the step to where the soft step's
+/// contacts had it (see [`RigidBodyMotion::position_correction`]).
 fn write_back_to_avian(
     time: Res<Time>,
     avian: Res<AvianBodies>,
     solver: Res<SolverSpheres>,
-    mut velocities: Query<(&mut LinearVelocity, &mut AngularVelocity)>,
+    mut bodies: Query<(
+        &mut LinearVelocity,
+        &mut AngularVelocity,
+        &mut Position,
+        &mut Rotation,
+    )>,
 ) {
     if time.delta_secs() <= 0.0 {
         return;
@@ -441,9 +449,13 @@ fn write_back_to_avian(
         if avian.sleeping[k] && dv.length() < WAKE_SPEED && dw.length() < WAKE_SPEED {
             continue;
         }
-        if let Ok((mut v, mut w)) = velocities.get_mut(entity) {
+        if let Ok((mut v, mut w, mut position, mut rotation)) = bodies.get_mut(entity) {
             v.0 += dv;
             w.0 += dw;
+            let centre = start.centre_of_mass;
+            let turn = Quat::from_scaled_axis(end.rotation_correction);
+            position.0 = centre + turn * (position.0 - centre) + end.position_correction;
+            rotation.0 = (turn * rotation.0).normalize();
         }
     }
 }

@@ -456,6 +456,7 @@ impl SoftBodyState {
             friction_anchors: anchors.map(|a| a.is_finite().then_some(*a)).collect(),
             static_contact: self.contacts.static_contact.clone(),
             soft_anchors: self.scratch.soft_anchors.clone(),
+            rigid_anchors: self.contacts.rigid_anchors.clone(),
             soft_pass: self.scratch.soft_pass,
             sleep: self.sleep.snapshot(),
             cracks: self.cracks.clone(),
@@ -503,6 +504,7 @@ impl SoftBodyState {
             .static_contact
             .copy_from_slice(&s.static_contact);
         self.scratch.soft_anchors.copy_from_slice(&s.soft_anchors);
+        self.contacts.restore_rigid_anchors(&s.rigid_anchors);
         self.scratch.soft_pass = s.soft_pass;
         self.sleep.restore(&s.sleep);
         self.cracks.clone_from(&s.cracks);

@@ -205,6 +205,17 @@ pub struct RigidBodyMotion {
     /// Whether the other engine has put the body to sleep: it wakes if a contact changes its
     /// velocity enough, but does not keep a soft body under it awake.
     pub asleep: bool,
+    /// Set by the step: where the body's path within the step, as the contacts moved it, ends
+    /// against where its velocity after the step takes it (`h v`). A change of velocity `dv`
+    /// at `t` seconds into the step moves the body `(h - t) dv` by the end, where `h v` counts
+    /// `h dv`: this is `-t dv` summed over the contacts' impulses (the body's gravity, which
+    /// the engine moving it gives it its own way, left out). Whoever moves the body over the
+    /// step adds it (`x += h v + position_correction`; the avian glue does): the particles
+    /// that touched the body were moved along that path, and with `x += h v` alone a crate
+    /// resting on a jelly crept across it.
+    pub position_correction: Vec3,
+    /// The same for its rotation (a scaled axis, in radians, about the centre of mass).
+    pub rotation_correction: Vec3,
     /// How many particles are attached to the body in this pass (scratch of the contacts).
     pub(crate) attached: u32,
 }
@@ -220,6 +231,8 @@ impl RigidBodyMotion {
             inv_inertia: Mat3::ZERO,
             gravity: Vec3::ZERO,
             asleep: false,
+            position_correction: Vec3::ZERO,
+            rotation_correction: Vec3::ZERO,
             attached: 0,
         }
     }
@@ -237,30 +250,49 @@ impl RigidBodyMotion {
         self.inv_mass + arm.dot(self.inv_inertia * arm)
     }
 
-    /// Applies `impulse` at offset `r` from the centre of mass.
+    /// Applies `impulse` at offset `r` from the centre of mass, `elapsed` seconds into the
+    /// step (see `position_correction`).
     #[inline]
-    pub(crate) fn apply_impulse(&mut self, impulse: Vec3, r: Vec3) {
-        self.linear_velocity += self.inv_mass * impulse;
-        self.angular_velocity += self.inv_inertia * r.cross(impulse);
+    pub(crate) fn apply_impulse(&mut self, impulse: Vec3, r: Vec3, elapsed: f32) {
+        let linear = self.inv_mass * impulse;
+        let angular = self.inv_inertia * r.cross(impulse);
+        self.linear_velocity += linear;
+        self.angular_velocity += angular;
+        self.position_correction -= elapsed * linear;
+        self.rotation_correction -= elapsed * angular;
     }
 
-    /// Where the body's point at `offset` from its centre of mass at the step's start is after
-    /// `t` seconds of this motion, and its offset from the centre of mass then.
+    /// The body's turn and the centre of mass's offset at the end of a substep of `h` that
+    /// starts `elapsed` seconds into the step, on its path within the step: its velocity now
+    /// over the whole time, less what the contacts' impulses and the substeps' gravity (`h
+    /// gravity` at each substep's start, `j h` seconds into the step) would have moved it
+    /// before they came.
     #[inline]
-    pub(crate) fn point_at(&self, offset: Vec3, t: f32) -> (Vec3, Vec3) {
-        let turned = Quat::from_scaled_axis(self.angular_velocity * t) * offset;
+    fn moved(&self, elapsed: f32, h: f32) -> (Quat, Vec3) {
+        let t = elapsed + h;
+        let turn = Quat::from_scaled_axis(self.angular_velocity * t + self.rotation_correction);
+        let gravity_lag = self.gravity * (elapsed * t / 2.0);
         (
-            self.centre_of_mass + t * self.linear_velocity + turned,
-            turned,
+            turn,
+            t * self.linear_velocity + self.position_correction - gravity_lag,
         )
     }
 
-    /// Where a frame at `pose` at the step's start is after `t` seconds of this motion, and where
-    /// the centre of mass is then.
+    /// Where the body's point at `offset` from its centre of mass at the step's start is `h`
+    /// seconds after `elapsed` (a substep's start), and its offset from the centre of mass then.
     #[inline]
-    pub(crate) fn advance(&self, pose: &Pose, t: f32) -> (Pose, Vec3) {
-        let turn = Quat::from_scaled_axis(self.angular_velocity * t);
-        let centre = self.centre_of_mass + t * self.linear_velocity;
+    pub(crate) fn point_at(&self, offset: Vec3, elapsed: f32, h: f32) -> (Vec3, Vec3) {
+        let (turn, moved) = self.moved(elapsed, h);
+        let turned = turn * offset;
+        (self.centre_of_mass + moved + turned, turned)
+    }
+
+    /// Where a frame at `pose` at the step's start is `h` seconds after `elapsed` (a substep's
+    /// start), and where the centre of mass is then.
+    #[inline]
+    pub(crate) fn advance(&self, pose: &Pose, elapsed: f32, h: f32) -> (Pose, Vec3) {
+        let (turn, moved) = self.moved(elapsed, h);
+        let centre = self.centre_of_mass + moved;
         let translation = centre + turn * (pose.translation - self.centre_of_mass);
         let pose = Pose::from_parts(translation, (turn * pose.rotation).normalize());
         (pose, centre)
@@ -332,7 +364,7 @@ impl RigidContacts {
     /// Whether `end` lies inside a collider where it is `t` seconds into the step.
     pub(crate) fn meets(&self, end: Vec3, t: f32) -> bool {
         self.colliders.iter().any(|c| {
-            let (pose, _) = self.bodies[c.body as usize].advance(&c.pose, t);
+            let (pose, _) = self.bodies[c.body as usize].advance(&c.pose, 0.0, t);
             c.shape.compute_aabb(&pose).contains_local_point(end)
                 && c.shape.project_point(&pose, end, false).is_inside
         })

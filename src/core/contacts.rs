@@ -14,10 +14,10 @@
 //! body carry it.
 //!
 //! Rigid bodies that another engine simulates (see [`RigidContacts`]) are met the same way, at
-//! their colliders' predicted poses: each push is an impulse shared by the particle and the body
-//! through their effective inverse masses (the body's includes its inverse inertia at the contact
-//! point), so linear and angular momentum are conserved, and friction is Coulomb's on the relative
-//! velocity at the contact point. The volume passes keep the whole of a push into such a body
+//! their colliders' poses along their paths within the step (`RigidBodyMotion::advance`): each
+//! push is an impulse shared by the particle and the body through their effective inverse
+//! masses (the body's includes its inverse inertia at the contact point), so linear and angular
+//! momentum are conserved, and so is each friction impulse (`rigid_friction`). The volume passes keep the whole of a push into such a body
 //! (removing it, as against the ground, would take momentum from the pair that the body never
 //! gets): the next contact pass (the next substep's, or the one that ends the step) hands it to
 //! the body. A jelly squashed under a crate thus holds the crate up with its volume too.
@@ -25,18 +25,22 @@
 //! Friction against a static collider holds a particle where it stands, not only its velocity
 //! (see `static_friction`): with velocity-only friction the volume impulses' small pushes at
 //! a resting body's base, each stopped by friction only while it pressed into the ground, made
-//! the body walk across the ground and never come to rest (PERFORMANCE.md). Against a
-//! sphere, friction is Coulomb's on the relative velocity. The ground's push that the volume
-//! impulses meet (their pushes into it that `constrain_direction` takes out) is a normal force
-//! too, and gets its friction after them (`support_friction`).
+//! the body walk across the ground and never come to rest (PERFORMANCE.md). Against a rigid
+//! body of another engine it holds the particle on a point of the body's collider, in the
+//! collider's frame (`rigid_friction`): with Coulomb's friction on velocities a crate resting
+//! on a jelly crept across it. Against a sphere, friction is Coulomb's on the relative
+//! velocity. The ground's push that the volume impulses meet (their pushes into it that
+//! `constrain_direction` takes out) is a normal force too, and gets its friction after them
+//! (`support_friction`).
 
 use glam::Vec3;
 use parry3d::bounding_volume::Aabb;
+use parry3d::math::Pose;
 
 use super::chunks::{ChunkFindings, in_particle_chunks};
 use super::colliders::{
-    ColliderInstance, CollisionFilter, RigidContacts, RigidSphereState, combined_friction,
-    friction_change,
+    ColliderInstance, CollisionFilter, RigidBodyMotion, RigidContacts, RigidSphereState,
+    combined_friction, friction_change,
 };
 use super::impulses::SOFT_CONTACT;
 use super::parallel::{Parallel, SharedSlice};
@@ -81,6 +85,62 @@ fn static_friction(
     (v, x + h * v)
 }
 
+/// Where static friction holds a particle on a rigid body's collider: a point in the frame of
+/// collider `collider` (its index in [`RigidContacts::colliders`]), set in the last rigid
+/// contact pass that found the particle inside it.
+#[derive(Clone, Copy, Debug, PartialEq)]
+#[cfg_attr(feature = "serialize", derive(serde::Serialize, serde::Deserialize))]
+pub struct RigidAnchor {
+    pub(crate) collider: u32,
+    pub(crate) local: Vec3,
+}
+
+impl RigidAnchor {
+    /// No anchor.
+    pub(crate) const NONE: RigidAnchor = RigidAnchor {
+        collider: u32::MAX,
+        local: Vec3::ZERO,
+    };
+}
+
+/// Coulomb friction between a particle of inverse mass `w` at `x` with velocity `v` and
+/// collider `collider` of `body`, at the contact point `r` from the body's centre of mass,
+/// the collider at `pose` where the particle is predicted (`x + h v`), as `static_friction`
+/// has it against the ground: the normal push (`depth` along `normal`, impulse `lambda`) is in
+/// `v`. A particle whose predicted position is at most `mu * depth` from its anchor
+/// (tangentially) is put back on it, the pair sharing the impulse by their inverse masses (the
+/// body's at `r`); otherwise the friction impulse on the relative velocity is at most
+/// `mu * lambda`. Returns the particle's velocity and its anchor, where it is predicted now.
+fn rigid_friction(
+    (x, v, w): (Vec3, Vec3, f32),
+    body: &mut RigidBodyMotion,
+    (collider, pose, r): (u32, &Pose, Vec3),
+    (normal, depth, lambda): (Vec3, f32, f32),
+    mu: f32,
+    (h, elapsed): (f32, f32),
+    anchor: RigidAnchor,
+) -> (Vec3, RigidAnchor) {
+    let tangential = |d: Vec3| d - normal * d.dot(normal);
+    let held = (anchor.collider == collider)
+        .then(|| tangential(x + h * v - pose.transform_point(anchor.local)))
+        .filter(|offset| offset.length_squared() <= (mu * depth).powi(2));
+    // The relative tangential velocity to take out, and the bound on the impulse doing it.
+    let (slip, bound) = match held {
+        Some(offset) => (offset / h, f32::INFINITY),
+        None => (tangential(v - body.velocity_at(r)), mu * lambda),
+    };
+    let mut v = v;
+    let slip_speed = slip.length();
+    if slip_speed > 0.0 {
+        let t = slip / slip_speed;
+        let impulse = (slip_speed / (w + body.inv_mass_along(r, t))).min(bound);
+        v -= t * (impulse * w);
+        body.apply_impulse(t * impulse, r, elapsed);
+    }
+    let local = pose.inverse_transform_point(x + h * v);
+    (v, RigidAnchor { collider, local })
+}
+
 /// What a body remembers of its contacts with colliders, spheres, rigid bodies and other
 /// soft bodies: what the volume passes must not push into, and where friction holds it.
 #[derive(Clone, Debug)]
@@ -107,6 +167,13 @@ pub(crate) struct ContactState {
     /// contact pass (zero when it touched none) and the pair's friction: what
     /// `support_friction` shares the ground's push out by.
     pub(crate) static_contact: Vec<[f32; 2]>,
+    /// Per particle, where static friction holds it on a rigid body's collider (see
+    /// `rigid_friction`); `RigidAnchor::NONE` if it touched none in the last rigid contact pass.
+    pub(crate) rigid_anchors: Vec<RigidAnchor>,
+    /// The particles with a rigid anchor, to forget those a pass finds touching no collider.
+    pub(crate) rigid_held: Vec<u32>,
+    /// Per particle, whether the rigid contact pass under way found it inside a collider.
+    rigid_touched: Vec<bool>,
 }
 
 impl ContactState {
@@ -120,6 +187,9 @@ impl ContactState {
             sphere: vec![u32::MAX; n],
             touching: Vec::with_capacity(n),
             static_contact: vec![[0.0; 2]; n],
+            rigid_anchors: vec![RigidAnchor::NONE; n],
+            rigid_held: Vec::with_capacity(n),
+            rigid_touched: vec![false; n],
         }
     }
 
@@ -185,6 +255,31 @@ impl ContactState {
             .zip(masses)
             .map(|(&[depth, _], &m)| m * depth)
             .sum()
+    }
+
+    /// The rigid anchors of a snapshot (`anchors`, one per particle) taken back.
+    pub(crate) fn restore_rigid_anchors(&mut self, anchors: &[RigidAnchor]) {
+        self.rigid_anchors.copy_from_slice(anchors);
+        self.rigid_held.clear();
+        let held = anchors
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| a.collider != u32::MAX);
+        self.rigid_held.extend(held.map(|(i, _)| i as u32));
+    }
+
+    /// After a rigid contact pass: the anchors of the particles it found touching no collider
+    /// forgotten.
+    fn forget_rigid_anchors(&mut self) {
+        let (anchors, touched) = (&mut self.rigid_anchors, &mut self.rigid_touched);
+        self.rigid_held.retain(|&i| {
+            let i = i as usize;
+            let keep = std::mem::take(&mut touched[i]);
+            if !keep {
+                anchors[i] = RigidAnchor::NONE;
+            }
+            keep
+        });
     }
 }
 
@@ -344,6 +439,7 @@ impl ContactBody<'_> {
     /// number of contacts.
     pub(crate) fn resolve_rigid(&mut self, h: f32, elapsed: f32, rigid: &mut RigidContacts) -> u32 {
         if rigid.colliders.is_empty() && rigid.attachments.is_empty() {
+            self.contacts.forget_rigid_anchors();
             return 0;
         }
         // Attached particles first: each is taken to its point of the body where both are
@@ -363,7 +459,7 @@ impl ContactBody<'_> {
             let w = self.inv_masses[i];
             let body = &mut rigid.bodies[a.body as usize];
             let split = body.attached as f32;
-            let (target, r) = body.point_at(a.offset, elapsed + h);
+            let (target, r) = body.point_at(a.offset, elapsed, h);
             let xp = self.positions[i] + h * self.velocities[i];
             let gap = target - xp;
             let distance = gap.length();
@@ -377,16 +473,16 @@ impl ContactBody<'_> {
             }
             let lambda = distance / h / inv_mass;
             self.velocities[i] += n * (lambda * w);
-            body.apply_impulse(-n * lambda, r);
+            body.apply_impulse(-n * lambda, r, elapsed);
         }
         let (friction, filter) = (self.friction, self.filter);
         let mut contacts = 0;
-        for c in &rigid.colliders {
+        for (k, c) in rigid.colliders.iter().enumerate() {
             if !filter.interacts_with(c.filter) {
                 continue;
             }
             let body = &mut rigid.bodies[c.body as usize];
-            let (pose, centre) = body.advance(&c.pose, elapsed + h);
+            let (pose, centre) = body.advance(&c.pose, elapsed, h);
             let bounds: Aabb = c.shape.compute_aabb(&pose);
             let mu = combined_friction(friction, c.friction);
             for i in 0..self.positions.len() {
@@ -412,23 +508,32 @@ impl ContactBody<'_> {
                 // The normal impulse that takes the predicted particle to the surface.
                 let lambda = depth / h / (w + body.inv_mass_along(r, n));
                 self.velocities[i] += n * (lambda * w);
-                body.apply_impulse(-n * lambda, r);
-                // Coulomb friction on the relative velocity at the contact point.
-                let relative = self.velocities[i] - body.velocity_at(r);
-                let slip = relative - n * relative.dot(n);
-                let slip_speed = slip.length();
-                if slip_speed > 0.0 {
-                    let t = slip / slip_speed;
-                    let jt = (slip_speed / (w + body.inv_mass_along(r, t))).min(mu * lambda);
-                    self.velocities[i] -= t * (jt * w);
-                    body.apply_impulse(t * jt, r);
+                body.apply_impulse(-n * lambda, r, elapsed);
+                let state = &mut *self.contacts;
+                let particle = (self.positions[i], self.velocities[i], w);
+                let anchor = state.rigid_anchors[i];
+                let (v, anchor_now) = rigid_friction(
+                    particle,
+                    body,
+                    (k as u32, &pose, r),
+                    (n, depth, lambda),
+                    mu,
+                    (h, elapsed),
+                    anchor,
+                );
+                self.velocities[i] = v;
+                if anchor.collider == u32::MAX {
+                    state.rigid_held.push(i as u32);
                 }
+                state.rigid_anchors[i] = anchor_now;
+                state.rigid_touched[i] = true;
                 // The volume passes keep the whole of a push into the body: the next contact
                 // pass hands it to the body, so momentum stays conserved.
-                self.contacts.record(i, n, 1.0, None);
+                state.record(i, n, 1.0, None);
                 contacts += 1;
             }
         }
+        self.contacts.forget_rigid_anchors();
         contacts
     }
 }
@@ -438,11 +543,10 @@ mod tests {
     use super::*;
     use crate::core::Serial;
     use crate::core::body::SoftBodyState;
-    use crate::core::colliders::{RigidBodyMotion, RigidCollider};
+    use crate::core::colliders::RigidCollider;
     use crate::core::material::SoftBodyMaterial;
     use crate::core::parallel::Threads;
     use glam::{Mat3, Quat, UVec3};
-    use parry3d::math::Pose;
     use parry3d::shape::{Ball, Cuboid, SharedShape};
 
     /// A rubber cube (1 MPa, 0.5 m) and a jelly cube resting on the ground at 60 Hz stay where

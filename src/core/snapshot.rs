@@ -22,12 +22,13 @@
 
 use glam::Vec3;
 
+use super::contacts::RigidAnchor;
 use super::material::{MaterialError, SoftBodyMaterial};
 use super::soft_records::SoftAnchor;
 use super::tet_mesh::TetMesh;
 
 /// The version of [`StateSnapshot`]'s layout; a snapshot of another is refused.
-pub const SNAPSHOT_VERSION: u32 = 1;
+pub const SNAPSHOT_VERSION: u32 = 2;
 
 /// What a snapshot says of its body's tet mesh: its size and a hash of its tets and rest
 /// positions (FNV-1a over their bits: the same on every machine and Rust version, which the
@@ -91,6 +92,9 @@ pub struct StateSnapshot {
     pub(crate) static_contact: Vec<[f32; 2]>,
     /// Per particle: where static friction holds it on another soft body.
     pub(crate) soft_anchors: Vec<SoftAnchor>,
+    /// Per particle: where static friction holds it on a rigid body's collider (the collider
+    /// named by its index among those the game gives the step).
+    pub(crate) rigid_anchors: Vec<RigidAnchor>,
     pub(crate) soft_pass: u32,
     pub(crate) sleep: SleepSnapshot,
     /// The faces cracked but not yet apart, and the time since the body last came apart
@@ -217,6 +221,7 @@ impl StateSnapshot {
             self.friction_anchors.len(),
             self.static_contact.len(),
             self.soft_anchors.len(),
+            self.rigid_anchors.len(),
         ];
         if per_particle.iter().any(|&len| len != n) {
             return damaged("a per-particle array has the wrong length");
@@ -238,6 +243,9 @@ impl StateSnapshot {
             |a: &SoftAnchor| a.partner == u32::MAX || a.corners.iter().all(|&c| c != u32::MAX);
         if !self.soft_anchors.iter().all(anchor_fits) {
             return damaged("a soft-contact anchor names no triangle");
+        }
+        if !self.rigid_anchors.iter().all(|a| a.local.is_finite()) {
+            return damaged("a rigid-contact anchor is not finite");
         }
         let sleep = &self.sleep;
         if !(sleep.still_at.is_empty() || sleep.still_at.len() == n) {

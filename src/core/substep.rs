@@ -281,9 +281,12 @@ impl SoftBodyState {
         if tet_compliance.is_some() || volumes {
             refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
         }
-        // The rigid bodies of another engine get their gravity per substep too.
+        // The rigid bodies of another engine get their gravity per substep too, and are
+        // followed along their path within the step.
         for body in &mut self.rigid.bodies {
             body.linear_velocity -= h * body.gravity;
+            body.position_correction = Vec3::ZERO;
+            body.rotation_correction = Vec3::ZERO;
         }
         let plan = SubstepPlan {
             substeps,

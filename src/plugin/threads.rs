@@ -192,6 +192,8 @@ pub(super) fn par_with_spheres(
             let (all, old) = (&mut solver.rigid[id as usize], &rigid_before[id as usize]);
             all.linear_velocity += motion.linear_velocity - old.linear_velocity;
             all.angular_velocity += motion.angular_velocity - old.angular_velocity;
+            all.position_correction += motion.position_correction - old.position_correction;
+            all.rotation_correction += motion.rotation_correction - old.rotation_correction;
         }
     }
     if solver.states.is_empty() {
