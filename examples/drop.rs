@@ -1,14 +1,15 @@
 //! Drops any mesh on the ground at game scale, as a game would: "try your mesh".
 //!
 //! cargo run --release --all-features --example drop -- MESH [--preset jelly] [--size 1]
-//!     [--hz 60] [--method paper|xpbd|clusters] [--tets N] [--seconds S] [--headless]
+//!     [--hz 60] [--method clusters|paper|xpbd] [--tets N] [--seconds S] [--headless]
 //!
 //! `MESH` is an OBJ file (tetrahedralized to about `N` tets, default 6000) or a TetGen mesh
 //! given by its `.node` file (the `.ele` beside it). The model is scaled so that its largest
 //! side is `--size` metres (default 1; printed as `scale`) and dropped at Earth gravity in a
 //! preset material (`jelly`, `flesh`, `rubber`, `hard_rubber`) from rest, its lowest point
-//! 0.5 m above the ground, stepped at `--hz` (30 to 240) with the paper's method, XPBD (10
-//! substeps) or XPBD with its cluster volume correction (`clusters`). Headless, it prints the
+//! 0.5 m above the ground, stepped at `--hz` (30 to 240) with the presets' method, XPBD with its
+//! cluster volume correction (`clusters`), the paper's impulses (`paper`) or XPBD alone (10
+//! substeps). Headless, it prints the
 //! volume error after every simulated second, then one line as `bench` prints its own:
 //! `mesh=NAME preset=NAME method=NAME hz=N tets=N mean_step_ms=X max_step_ms=X
 //! peak_volume_error_pct=X final_inverted_tets=N asleep_s=X` (`-`: not asleep at the end). In a
@@ -51,8 +52,9 @@ struct Args {
     /// Steps a second
     #[arg(long, default_value_t = 60.0, value_parser = rate)]
     hz: f32,
-    /// How the volume is kept: paper (the impulses) or xpbd (10 substeps)
-    #[arg(long, default_value = "paper", value_parser = ["paper", "xpbd", "clusters"])]
+    /// How the volume is kept: clusters (the presets' own: XPBD and its cluster correction),
+    /// paper (the impulses) or xpbd (10 substeps)
+    #[arg(long, default_value = "clusters", value_parser = ["clusters", "paper", "xpbd"])]
     method: String,
     /// Simulated seconds, headless
     #[arg(long, default_value_t = 3.0, value_parser = seconds)]
@@ -136,8 +138,8 @@ fn material(args: &Args) -> SoftBodyMaterial {
         .map_or(SoftBodyMaterial::JELLY, |p| p.1);
     let method = match args.method.as_str() {
         "xpbd" => VolumeMethod::XPBD,
-        "clusters" => VolumeMethod::XPBD_CLUSTERS,
-        _ => VolumeMethod::PAPER_IMPULSES,
+        "paper" => VolumeMethod::PAPER_IMPULSES,
+        _ => VolumeMethod::XPBD_CLUSTERS,
     };
     preset.with_method(method)
 }

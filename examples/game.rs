@@ -1,7 +1,7 @@
 //! Game-scale scenes in a window (`bevy_soft_body::game_scenes`): at Earth gravity and 60 Hz,
 //! a jelly cube, a flesh cube and a hard rubber cube of 0.5 m dropped from 1 m, a rubber ball
-//! dropped from 2 m and a 100 kg sphere landing on a jelly block, side by side, with the paper's
-//! method. Controls are listed on screen; `--screenshot PATH --frames N` saves a picture after N
+//! dropped from 2 m and a 100 kg sphere landing on a jelly block, side by side, with the
+//! presets' method (XPBD and its cluster volume correction). Controls are listed on screen; `--screenshot PATH --frames N` saves a picture after N
 //! steps of 1/60 s and exits.
 
 mod common;
@@ -56,7 +56,7 @@ fn spawn_scenes(
             continue;
         };
         let offset = Vec3::X * (k as f32 - 0.5 * (count - 1.0)) * SPACING;
-        let body = match scene.spawn_body(&mut commands, VolumeMethod::PAPER_IMPULSES, offset) {
+        let body = match scene.spawn_body(&mut commands, VolumeMethod::default(), offset) {
             Ok(body) => body,
             Err(e) => {
                 error!("{e}");

@@ -11,6 +11,9 @@ use bevy_soft_body::prelude::*;
 
 const RATES: [f32; 3] = [30.0, 60.0, 120.0];
 
+/// The presets' method and the paper's impulses: what the behaviour tests run.
+const METHODS: [VolumeMethod; 2] = [VolumeMethod::XPBD_CLUSTERS, VolumeMethod::PAPER_IMPULSES];
+
 fn scene(name: &str) -> GameScene {
     GameScene::standard()
         .into_iter()
@@ -71,12 +74,13 @@ fn resting_and_stacked_bodies_keep_their_volume_under_one_percent() {
         ..scene("jelly_cube_drop")
     };
     for scene in [resting, scene("sphere_on_soft_block")] {
-        for hz in RATES {
-            let r = scene.run(VolumeMethod::PAPER_IMPULSES, hz).unwrap();
+        for (hz, method) in RATES.into_iter().flat_map(|hz| METHODS.map(|m| (hz, m))) {
+            let r = scene.run(method, hz).unwrap();
             assert!(
                 r.peak_volume_error_pct < 1.0,
-                "{} at {hz} Hz: {r:?}",
-                scene.name
+                "{} at {hz} Hz, {}: {r:?}",
+                scene.name,
+                method.name()
             );
         }
     }
@@ -89,18 +93,18 @@ fn stiff_bodies_rest_near_their_height_and_soft_ones_squash_and_recover() {
         "rubber_cube_drop",
         "sphere_on_soft_block",
     ] {
-        for hz in RATES {
-            let r = scene(name).run(VolumeMethod::PAPER_IMPULSES, hz).unwrap();
-            assert!(r.final_height >= 0.95, "{name} at {hz} Hz: {r:?}");
+        for (hz, method) in RATES.into_iter().flat_map(|hz| METHODS.map(|m| (hz, m))) {
+            let r = scene(name).run(method, hz).unwrap();
+            let name = format!("{name} at {hz} Hz, {}", method.name());
+            assert!(r.final_height >= 0.95, "{name}: {r:?}");
         }
     }
-    for hz in RATES {
-        let r = scene("jelly_cube_drop")
-            .run(VolumeMethod::PAPER_IMPULSES, hz)
-            .unwrap();
+    for (hz, method) in RATES.into_iter().flat_map(|hz| METHODS.map(|m| (hz, m))) {
+        let r = scene("jelly_cube_drop").run(method, hz).unwrap();
         // Squashed to well under its height on landing, then back up most of the way.
-        assert!(r.lowest_height < 0.8, "{hz} Hz: {r:?}");
-        assert!(r.final_height > 0.85, "{hz} Hz: {r:?}");
+        let name = format!("{hz} Hz, {}", method.name());
+        assert!(r.lowest_height < 0.8, "{name}: {r:?}");
+        assert!(r.final_height > 0.85, "{name}: {r:?}");
     }
 }
 
@@ -110,8 +114,8 @@ fn stiff_bodies_rest_near_their_height_and_soft_ones_squash_and_recover() {
 #[test]
 fn no_dropped_body_bounces_higher_than_it_fell() {
     for scene in GameScene::standard().into_iter().filter(|s| s.lift > 0.0) {
-        for hz in RATES {
-            let mut world = scene.world(VolumeMethod::PAPER_IMPULSES).unwrap();
+        for (hz, method) in RATES.into_iter().flat_map(|hz| METHODS.map(|m| (hz, m))) {
+            let mut world = scene.world(method).unwrap();
             let lowest = |w: &bevy_soft_body::game_scenes::GameWorld| {
                 w.body
                     .positions()
@@ -129,8 +133,9 @@ fn no_dropped_body_bounces_higher_than_it_fell() {
             }
             assert!(
                 highest_after < scene.lift,
-                "{} at {hz} Hz: dropped from {} m, back up to {highest_after} m",
+                "{} at {hz} Hz, {}: dropped from {} m, back up to {highest_after} m",
                 scene.name,
+                method.name(),
                 scene.lift
             );
         }
@@ -144,23 +149,26 @@ fn a_crushed_body_gets_its_volume_back_without_being_thrown() {
         lift: 0.0,
         ..scene("jelly_cube_drop")
     };
-    let mut world = scene.world(VolumeMethod::PAPER_IMPULSES).unwrap();
-    world.body.map_positions(|p| Vec3::new(p.x, 0.5 * p.y, p.z));
-    let start = world.body.volume_metrics().volume_error_pct;
-    assert!(start < -49.0, "{start}");
-    let rest_centre = 0.5 * world.rest_height;
-    let mut highest = 0.0f32;
-    for _ in 0..120 {
-        world.step(1.0 / 60.0);
-        highest = highest.max(world.body.centre_of_mass().y);
+    for method in METHODS {
+        let mut world = scene.world(method).unwrap();
+        world.body.map_positions(|p| Vec3::new(p.x, 0.5 * p.y, p.z));
+        let start = world.body.volume_metrics().volume_error_pct;
+        assert!(start < -49.0, "{start}");
+        let rest_centre = 0.5 * world.rest_height;
+        let mut highest = 0.0f32;
+        for _ in 0..120 {
+            world.step(1.0 / 60.0);
+            highest = highest.max(world.body.centre_of_mass().y);
+        }
+        let end = world.body.volume_metrics();
+        let name = method.name();
+        assert!(end.volume_error_pct.abs() < 1.0, "{name}: {end:?}");
+        // Restored in place: its centre of mass rises to about its rest height, not far above.
+        assert!(
+            highest < 1.3 * rest_centre,
+            "{name}: thrown to {highest} (rest {rest_centre})"
+        );
     }
-    let end = world.body.volume_metrics();
-    assert!(end.volume_error_pct.abs() < 1.0, "{end:?}");
-    // Restored in place: its centre of mass rises to about its rest height, not far above.
-    assert!(
-        highest < 1.3 * rest_centre,
-        "thrown to {highest} (rest {rest_centre})"
-    );
 }
 
 #[test]
@@ -169,20 +177,18 @@ fn a_stiff_body_on_an_irregular_mesh_falls_without_deforming() {
     // half a second at every rate: a falling body keeps its rest shape. Its edges' dampers, run
     // as a pass of their own after the projection, made it stretch and run away here.
     let scene = scene("hard_rubber_cube_graded");
-    for hz in RATES {
-        let mut world = scene.world(VolumeMethod::PAPER_IMPULSES).unwrap();
+    for (hz, method) in RATES.into_iter().flat_map(|hz| METHODS.map(|m| (hz, m))) {
+        let mut world = scene.world(method).unwrap();
         world.colliders.clear();
+        let name = format!("{hz} Hz, {}", method.name());
         for _ in 0..(hz / 2.0) as usize {
             world.step(1.0 / hz);
-            assert!(world.body.runaway().is_none(), "{hz} Hz");
+            assert!(world.body.runaway().is_none(), "{name}");
         }
         let height = world.height_ratio();
         let metrics = world.body.volume_metrics();
-        assert!((height - 1.0).abs() < 1e-3, "{hz} Hz: height {height}");
-        assert!(
-            metrics.mean_abs_tet_error_pct < 0.01,
-            "{hz} Hz: {metrics:?}"
-        );
+        assert!((height - 1.0).abs() < 1e-3, "{name}: height {height}");
+        assert!(metrics.mean_abs_tet_error_pct < 0.01, "{name}: {metrics:?}");
     }
 }
 

@@ -36,6 +36,12 @@ pub(crate) struct StepScratch {
     /// How far each particle moved in a substep's shape solve, from its start (`predicted`);
     /// see `SoftBodyState::substep_shape`.
     pub(crate) shape_moves: Vec<Vec3>,
+    /// What of XPBD's volume projection in a substep the velocities do not take
+    /// (`xpbd::hold_back_volume_moves`).
+    pub(crate) volume_held_back: Vec<Vec3>,
+    /// Whether this step's substeps hold any back (the body's volume had drifted at the step's
+    /// start; `xpbd::VOLUME_DRIFT`).
+    pub(crate) volume_drifted: bool,
     /// The tets in SIMD bundles, for the tet shape model (see `deviatoric.rs`).
     pub(crate) shape_bundles: Vec<ShapeBundle>,
     /// This step's substeps, from their plan to the step's finish (`substep.rs`).
@@ -84,6 +90,8 @@ impl StepScratch {
             clusters: ClusterVolumes::default(),
             substep_velocities: vec![Vec3::ZERO; n],
             shape_moves: vec![Vec3::ZERO; n],
+            volume_held_back: vec![Vec3::ZERO; n],
+            volume_drifted: false,
             shape_bundles: shape_bundles(mesh),
         }
     }

@@ -56,7 +56,9 @@ use super::substep_plan::{
     Stage, SubstepPlan, SubstepStage, spheres_after_bodies, spheres_before_bodies,
 };
 use super::tearing::{crack_crossed, largest_strain, split_particles, tear_mesh};
-use super::xpbd::{EdgeConstraints, project_edges, project_volume_bundles};
+use super::xpbd::{
+    EdgeConstraints, hold_back_volume_moves, project_edges, project_volume_bundles, volume_drifted,
+};
 use parry3d::bounding_volume::BoundingVolume;
 use parry3d::query::Ray;
 
@@ -281,6 +283,7 @@ impl SoftBodyState {
         if tet_compliance.is_some() || volumes {
             refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
         }
+        self.scratch.volume_drifted = volumes && volume_drifted(&self.mesh, &self.positions);
         // The rigid bodies of another engine get their gravity per substep too, and are
         // followed along their path within the step.
         for body in &mut self.rigid.bodies {
@@ -518,7 +521,17 @@ impl SoftBodyState {
             ),
         }
         if plan.volumes {
+            let (held, drifted) = (
+                &mut self.scratch.volume_held_back,
+                self.scratch.volume_drifted,
+            );
+            if drifted {
+                held.copy_from_slice(moves);
+            }
             project_volume_bundles(&self.scratch.shape_bundles, moves, start);
+            if drifted {
+                hold_back_volume_moves(held, moves, &self.masses, &self.inv_masses);
+            }
         }
         for ((x, s), m) in self
             .positions
@@ -531,16 +544,23 @@ impl SoftBodyState {
     }
 
     /// The velocities the substep's shape solve gives (its moves, and where the contacts
-    /// between bodies stepped together took the particles after it), with the particles back
+    /// between bodies stepped together took the particles after it, less the part of XPBD's
+    /// volume projection they do not take: `hold_back_volume_moves`), with the particles back
     /// where the substep started.
     fn substep_velocities(&mut self, plan: &SubstepPlan) {
         let hs = plan.hs;
         let (start, moves) = (&self.scratch.predicted, &self.scratch.shape_moves);
+        let held_back = &self.scratch.volume_held_back;
         for i in 0..self.positions.len() {
             let start = start[i].vec3();
             // Zero but where a contact between bodies moved the particle.
             let contact = self.positions[i] - (start + moves[i]);
-            let v = (moves[i] + contact) / hs;
+            let held = if plan.volumes && self.scratch.volume_drifted {
+                held_back[i]
+            } else {
+                Vec3::ZERO
+            };
+            let v = (moves[i] + contact - held) / hs;
             if v.is_finite() {
                 self.velocities[i] = v;
             } else {
@@ -624,6 +644,16 @@ impl SoftBodyState {
         if plan.volumes {
             for (x, v) in self.positions.iter_mut().zip(&self.velocities) {
                 *x += hs * *v;
+            }
+            if self.scratch.volume_drifted {
+                // With what of XPBD's volume projection the velocities did not take, but into
+                // nothing a particle touches: the contacts, after it, would throw the particle
+                // out (a body crushed on the ground, its volume put back, leapt off it).
+                let held_back = &self.scratch.volume_held_back;
+                let normals = &self.contacts.normals;
+                for ((x, &held), &n) in self.positions.iter_mut().zip(held_back).zip(normals) {
+                    *x += held - n * held.dot(n).min(0.0);
+                }
             }
             return;
         }
