@@ -231,6 +231,34 @@ pub(crate) struct SoftCandidates {
     pub(crate) lists: Vec<CandidateList>,
     pub(crate) particles: Vec<CandidateParticle>,
     pub(crate) triangles: Vec<u32>,
+    /// Per triangle of the body searched, the search (one a particle) that last met it: the
+    /// grid brings a triangle once for each cell it overlaps, and each is tested once.
+    seen: Vec<u32>,
+    search: u32,
+}
+
+/// The triangles one particle's search lists (see [`SoftCandidates::push`]).
+pub(crate) struct Listed<'a> {
+    triangles: &'a mut Vec<u32>,
+    seen: &'a mut [u32],
+    search: u32,
+}
+
+impl Listed<'_> {
+    /// Whether this search meets triangle `t` for the first time.
+    #[inline]
+    pub(crate) fn first_time(&mut self, t: u32) -> bool {
+        let seen = &mut self.seen[t as usize];
+        let first = *seen != self.search;
+        *seen = self.search;
+        first
+    }
+
+    /// Lists triangle `t`.
+    #[inline]
+    pub(crate) fn push(&mut self, t: u32) {
+        self.triangles.push(t);
+    }
 }
 
 /// Per particle (boundary particles only): where it was when the step's candidates were found,
@@ -259,24 +287,28 @@ impl SoftCandidates {
         });
     }
 
-    /// Adds `particle` to the current list with the triangles `near` adds (each kept once); a
-    /// particle with none is left out.
-    pub(crate) fn push(&mut self, particle: u32, near: impl FnOnce(&mut Vec<u32>)) {
+    /// Adds `particle` to the current list with the triangles `near` lists, of a body of
+    /// `triangles` triangles (each listed once: see [`Listed::first_time`]), in ascending
+    /// order; a particle with none is left out.
+    pub(crate) fn push(&mut self, particle: u32, triangles: usize, near: impl FnOnce(&mut Listed)) {
+        if self.seen.len() < triangles {
+            self.seen.resize(triangles, 0);
+        }
+        if self.search == u32::MAX {
+            self.seen.fill(0);
+            self.search = 0;
+        }
+        self.search += 1;
         let start = self.triangles.len();
-        near(&mut self.triangles);
+        near(&mut Listed {
+            triangles: &mut self.triangles,
+            seen: &mut self.seen,
+            search: self.search,
+        });
         if self.triangles.len() == start {
             return;
         }
-        let run = &mut self.triangles[start..];
-        run.sort_unstable();
-        let mut kept = 1;
-        for k in 1..run.len() {
-            if run[k] != run[kept - 1] {
-                run[kept] = run[k];
-                kept += 1;
-            }
-        }
-        self.triangles.truncate(start + kept);
+        self.triangles[start..].sort_unstable();
         self.particles.push(CandidateParticle {
             particle,
             start: start as u32,

@@ -184,10 +184,11 @@ fn gather_pair(body: &mut SoftBodyState, other: &SoftBodyState, region: &Aabb, p
         if !near.intersects(region) {
             continue;
         }
-        out.push(i, |listed| {
+        out.push(i, triangles.len(), |listed| {
             grid.for_each_near(&near, |t| {
                 let tri = triangles[t as usize];
-                if grid.bounds(t).intersects(&near)
+                if listed.first_time(t)
+                    && grid.bounds(t).intersects(&near)
                     && within(at, tri, x, reach + widest(tri, radius))
                 {
                     listed.push(t);
@@ -240,10 +241,11 @@ fn gather_self(body: &mut SoftBodyState, slot: u32) {
             let q = closest_barycentric(r, a, b, c);
             (a * q.x + b * q.y + c * q.z).distance(r) < 2.0 * edge
         };
-        out.push(i, |listed| {
+        out.push(i, triangles.len(), |listed| {
             grid.for_each_near(&near, |t| {
                 let tri = triangles[t as usize];
-                if grid.bounds(t).intersects(&near)
+                if listed.first_time(t)
+                    && grid.bounds(t).intersects(&near)
                     && !neighbour(tri)
                     && within(at, tri, x, reach + widest(tri, &paths.radius))
                 {
