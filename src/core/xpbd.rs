@@ -109,9 +109,9 @@ pub(crate) fn volume_drifted(mesh: &TetMesh, positions: &[Vec3]) -> bool {
 /// that adds no kinetic energy (the rule the paper's impulses keep, `substep_advance`). A
 /// projection that stops a compression keeps all of it; one that only puts back volume lost
 /// before (a body crushed flat, what a landing's squash left) moves the particles without
-/// throwing them: a jelly cube crushed to half its height flew 14 times its height. `held`
-/// comes in as the moves before the projection, `moves` as those after; `held` leaves as
-/// `(1 - k) dx`. One `k` for the whole body, so momentum is kept.
+/// throwing them (PERFORMANCE.md, stop 58). `held` comes in as the moves before the
+/// projection, `moves` as those after; `held` leaves as `(1 - k) dx`. One `k` for the whole
+/// body, so momentum is kept.
 pub(crate) fn hold_back_volume_moves(
     held: &mut [Vec3],
     moves: &[Vec3],
