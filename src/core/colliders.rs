@@ -380,3 +380,51 @@ impl std::fmt::Debug for RigidContacts {
             .finish()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Within a step the contacts see a rigid body where its path takes it: each substep's
+    /// gravity and each contact impulse moves it on from then, not from the step's start
+    /// (`RigidBodyMotion::position_correction`). A body given its gravity per substep and an
+    /// impulse in every substep is met, substep after substep, where moving it `h_s v` at a
+    /// time puts it, turned as turning it `h_s w` at a time does.
+    #[test]
+    fn a_rigid_body_is_met_along_its_path_within_the_step() {
+        let (h, substeps) = (1.0 / 60.0, 10);
+        let hs = h / substeps as f32;
+        let start = Pose::from_parts(Vec3::new(0.3, 1.0, -0.2), Quat::from_rotation_y(0.4));
+        let mut body = RigidBodyMotion {
+            inv_mass: 0.5,
+            inv_inertia: Mat3::from_diagonal(Vec3::new(3.0, 2.0, 4.0)),
+            gravity: Vec3::new(0.0, -9.81, 0.0),
+            ..RigidBodyMotion::kinematic(start.translation, Vec3::new(1.0, 2.0, 0.5), Vec3::Y)
+        };
+        // As the step plans its substeps: the step's gravity taken back, to hand out per substep.
+        body.linear_velocity -= h * body.gravity;
+        let (mut centre, mut turn) = (start.translation, start.rotation);
+        for k in 0..substeps {
+            let elapsed = k as f32 * hs;
+            body.linear_velocity += hs * body.gravity;
+            let (pose, at) = body.advance(&start, elapsed, hs);
+            let (path, path_turn) = (
+                centre + hs * body.linear_velocity,
+                Quat::from_scaled_axis(hs * body.angular_velocity) * turn,
+            );
+            assert!(
+                at.distance(path) < 1e-5,
+                "substep {k}: met at {at}, on its path at {path}"
+            );
+            assert!(
+                pose.rotation.angle_between(path_turn) < 1e-3,
+                "substep {k}: turned {:?}, on its path {path_turn:?}",
+                pose.rotation
+            );
+            let impulse = Vec3::new(0.3, 1.0 + k as f32, -0.2 * k as f32);
+            body.apply_impulse(impulse, Vec3::new(0.1, -0.2, 0.05), elapsed);
+            centre += hs * body.linear_velocity;
+            turn = Quat::from_scaled_axis(hs * body.angular_velocity) * turn;
+        }
+    }
+}
