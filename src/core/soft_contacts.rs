@@ -490,6 +490,18 @@ fn nearest_triangle(
         }
         let corners = tri.map(|j| j as usize);
         let end = corners.map(&corner);
+        // A triangle whose bounds are already further than the nearest so far (past the tie
+        // margin) can be neither nearer nor as near.
+        if let Some((.., best)) = nearest {
+            let (lo, hi) = (
+                end[0].min(end[1]).min(end[2]),
+                end[0].max(end[1]).max(end[2]),
+            );
+            let outside = (lo - xp).max(xp - hi).max(Vec3::ZERO).length_squared();
+            if outside * (1.0 - 1e-5) > best + 1e-14 {
+                return;
+            }
+        }
         let q = closest_barycentric(xp, end[0], end[1], end[2]);
         let offset = xp - (end[0] * q.x + end[1] * q.y + end[2] * q.z);
         let distance = offset.length_squared();
