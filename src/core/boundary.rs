@@ -333,6 +333,19 @@ impl SoftCandidates {
     }
 }
 
+/// Whether the bounds of the triangle with corners `end` are further from `x` than `best`
+/// (a squared distance) by more than a nearest-triangle search's tie margin: then no point of
+/// it is nearer, nor as near.
+#[inline]
+pub(crate) fn bounds_beyond(x: Vec3, end: &[Vec3; 3], best: f32) -> bool {
+    let (lo, hi) = (
+        end[0].min(end[1]).min(end[2]),
+        end[0].max(end[1]).max(end[2]),
+    );
+    let outside = (lo - x).max(x - hi).max(Vec3::ZERO).length_squared();
+    outside * (1.0 - 1e-5) > best + 1e-14
+}
+
 /// The point of triangle `abc` closest to `p`, as barycentric weights (Ericson, "Real-Time
 /// Collision Detection", 5.1.5).
 pub(crate) fn closest_barycentric(p: Vec3, a: Vec3, b: Vec3, c: Vec3) -> Vec3 {

@@ -34,7 +34,7 @@ use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::body::SoftBodyState;
 use super::boundary::{
-    Boundary, CandidateParticle, SoftCandidates, TriangleGrid, closest_barycentric,
+    Boundary, CandidateParticle, SoftCandidates, TriangleGrid, bounds_beyond, closest_barycentric,
 };
 use super::colliders::combined_friction;
 use super::contacts::{ContactState, MAX_DEPENETRATION_SPEED};
@@ -490,17 +490,9 @@ fn nearest_triangle(
         }
         let corners = tri.map(|j| j as usize);
         let end = corners.map(&corner);
-        // A triangle whose bounds are already further than the nearest so far (past the tie
-        // margin) can be neither nearer nor as near.
-        if let Some((.., best)) = nearest {
-            let (lo, hi) = (
-                end[0].min(end[1]).min(end[2]),
-                end[0].max(end[1]).max(end[2]),
-            );
-            let outside = (lo - xp).max(xp - hi).max(Vec3::ZERO).length_squared();
-            if outside * (1.0 - 1e-5) > best + 1e-14 {
-                return;
-            }
+        // Bounds further than the nearest so far (past the tie margin): neither nearer nor tied.
+        if nearest.is_some_and(|(.., best)| bounds_beyond(xp, &end, best)) {
+            return;
         }
         let q = closest_barycentric(xp, end[0], end[1], end[2]);
         let offset = xp - (end[0] * q.x + end[1] * q.y + end[2] * q.z);
