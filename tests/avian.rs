@@ -144,7 +144,7 @@ fn depth_inside_box(x: Vec3, half: Vec3, position: Vec3, rotation: Quat) -> f32 
 /// `g h^2 / 2` and the jelly pushes it back), held up by the jelly, with no particle inside it,
 /// and the jelly keeps its volume under it. Without static friction on the crate, or with the
 /// crate moved at its velocity after each step rather than along its path within it (see
-/// `RigidBodyMotion::position_correction`), it crept across the jelly at 1-3 mm/s.
+/// `RigidBodyMotion::position_correction`), it crept across the jelly (PERFORMANCE.md, stop 58).
 #[test]
 fn a_crate_comes_to_rest_on_a_jelly() {
     for method in [
