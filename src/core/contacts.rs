@@ -17,10 +17,11 @@
 //! their colliders' poses along their paths within the step (`RigidBodyMotion::advance`): each
 //! push is an impulse shared by the particle and the body through their effective inverse
 //! masses (the body's includes its inverse inertia at the contact point), so linear and angular
-//! momentum are conserved, and so is each friction impulse (`rigid_friction`). The volume passes keep the whole of a push into such a body
-//! (removing it, as against the ground, would take momentum from the pair that the body never
-//! gets): the next contact pass (the next substep's, or the one that ends the step) hands it to
-//! the body. A jelly squashed under a crate thus holds the crate up with its volume too.
+//! momentum are conserved, and so is each friction impulse (`rigid_friction`). The volume
+//! passes keep the whole of a push into such a body (removing it, as against the ground, would
+//! take momentum from the pair that the body never gets): the next contact pass (the next
+//! substep's, or the one that ends the step) hands it to the body. A jelly squashed under a
+//! crate thus holds the crate up with its volume too.
 //!
 //! Friction against a static collider holds a particle where it stands, not only its velocity
 //! (see `static_friction`): with velocity-only friction the volume impulses' small pushes at
