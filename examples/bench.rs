@@ -3,7 +3,8 @@
 //! cargo run --release --all-features --example bench -- [--threads N[,N...]] [--only NAME]
 //!
 //! prints one line per run, `scene=NAME method=NAME threads=N tets=N mean_step_ms=X
-//! max_step_ms=X` (the slowest step): the five
+//! max_step_ms=X awake_bodies=X` (the slowest step; the bodies awake, hence stepped, after
+//! a step, on average: a scene whose bodies fall asleep costs less per step): the five
 //! paper scenes with the three methods (`baseline`, `paper`, `xpbd` with 10 substeps unless
 //! `--xpbd-substeps N`) over their whole duration, boxes of 1 000 to 200 000 tets
 //! settling on the ground (100 steps; the small ones again from the start, 18 and 2 times),
@@ -144,30 +145,38 @@ const TURN: u32 = 50;
 /// spells (here the same build's step times move by 30 % and more between minutes) then fall
 /// on all methods alike, so their ratios within a run mean something. Each turn is long enough
 /// (0.1 ms to 5 ms a step) for a body's data to be back in the caches after its first step.
-fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, SoftBodyStepTime)> {
+fn run_in_turns(apps: &mut [App], steps: u32) -> Vec<(usize, SoftBodyStepTime, u64)> {
     // The first update only starts the clock.
     for app in apps.iter_mut() {
         app.update();
     }
+    let mut awake = vec![0u64; apps.len()];
     let mut done = 0;
     while done < steps {
         let turn = TURN.min(steps - done);
-        for app in apps.iter_mut() {
+        for (app, awake) in apps.iter_mut().zip(&mut awake) {
             for _ in 0..turn {
                 app.update();
+                let world = app.world_mut();
+                *awake += world
+                    .query::<&SoftBody>()
+                    .iter(world)
+                    .filter(|b| !b.state().is_sleeping())
+                    .count() as u64;
             }
         }
         done += turn;
     }
     apps.iter_mut()
-        .map(|app| {
+        .zip(awake)
+        .map(|(app, awake)| {
             let world = app.world_mut();
             let tets = world
                 .query::<&SoftBody>()
                 .iter(world)
                 .map(|b| b.state().mesh().tet_count())
                 .sum();
-            (tets, *world.resource::<SoftBodyStepTime>())
+            (tets, *world.resource::<SoftBodyStepTime>(), awake)
         })
         .collect()
 }
@@ -195,7 +204,7 @@ fn bench(
         .iter()
         .flat_map(|&threads| methods.iter().map(move |&method| (threads, method)))
         .collect();
-    let mut results: Vec<(usize, SoftBodyStepTime)> = Vec::new();
+    let mut results: Vec<(usize, SoftBodyStepTime, u64)> = Vec::new();
     for repeat in 0..repeats.max(1) {
         let mut apps: Vec<App> = runs
             .iter()
@@ -210,13 +219,14 @@ fn bench(
         if repeat == 0 {
             results = clocks;
         } else {
-            for ((_, clock), (_, more)) in results.iter_mut().zip(&clocks) {
+            for ((_, clock, awake), (_, more, more_awake)) in results.iter_mut().zip(&clocks) {
                 add_clock(clock, more);
+                *awake += more_awake;
             }
         }
     }
-    for (&(threads, method), (tets, clock)) in runs.iter().zip(results) {
-        report(name, method.name(), threads, tets, &clock);
+    for (&(threads, method), (tets, clock, awake)) in runs.iter().zip(results) {
+        report(name, method.name(), threads, tets, &clock, awake);
         if args.stages {
             let s = clock.mean_stage_ms();
             println!(
@@ -235,11 +245,19 @@ fn bench(
     }
 }
 
-fn report(scene: &str, method: &str, threads: usize, tets: usize, clock: &SoftBodyStepTime) {
+fn report(
+    scene: &str,
+    method: &str,
+    threads: usize,
+    tets: usize,
+    clock: &SoftBodyStepTime,
+    awake: u64,
+) {
     println!(
-        "scene={scene} method={method} threads={threads} tets={tets} mean_step_ms={:.3} max_step_ms={:.3}",
+        "scene={scene} method={method} threads={threads} tets={tets} mean_step_ms={:.3} max_step_ms={:.3} awake_bodies={:.2}",
         clock.mean_ms(),
-        clock.max_ms
+        clock.max_ms,
+        awake as f64 / clock.steps.max(1) as f64
     );
 }
 
