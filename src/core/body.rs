@@ -455,6 +455,7 @@ impl SoftBodyState {
             plastic_strain: self.springs.plastic_strain.clone(),
             friction_anchors: anchors.map(|a| a.is_finite().then_some(*a)).collect(),
             static_contact: self.contacts.static_contact.clone(),
+            static_normals: self.contacts.static_normals.clone(),
             soft_anchors: self.scratch.soft_anchors.clone(),
             rigid_anchors: self.contacts.rigid_anchors.clone(),
             soft_pass: self.scratch.soft_pass,
@@ -503,6 +504,9 @@ impl SoftBodyState {
         self.contacts
             .static_contact
             .copy_from_slice(&s.static_contact);
+        self.contacts
+            .static_normals
+            .copy_from_slice(&s.static_normals);
         self.scratch.soft_anchors.copy_from_slice(&s.soft_anchors);
         self.contacts.restore_rigid_anchors(&s.rigid_anchors);
         self.scratch.soft_pass = s.soft_pass;

@@ -1,6 +1,7 @@
 //! A soft body's boundary as other soft bodies meet it (`soft_contacts.rs`): its outward
 //! triangles and the particles on them, a uniform grid that hashes the triangles for a contact
-//! pass, and how the body meets others.
+//! pass, how the body meets others, and what a contact pass asks of the triangles (the nearest
+//! one to a particle, how far the particle is past it).
 
 use glam::{IVec3, Vec3};
 use parry3d::bounding_volume::Aabb;
@@ -331,6 +332,108 @@ impl SoftCandidates {
     pub(crate) fn triangles_of(&self, particle: &CandidateParticle) -> &[u32] {
         &self.triangles[particle.start as usize..particle.end as usize]
     }
+}
+
+/// The signed distance of `xp` past the triangle `corners` (negative inside), the direction
+/// that takes it out, and the barycentric weights of its nearest point; `None` for a
+/// degenerate triangle. Over the triangle, the distance along its outward normal. Nearest to
+/// one of its edges or corners, the particle is outside (infinitely far: another triangle
+/// decides) unless it lies behind the triangle's plane: then it is inside a dent (a concave
+/// edge or corner, as an impact leaves) or under the edge between two triangles of a flat
+/// face, and comes out to that nearest point. Only with `dents` (the final pass): the
+/// substeps, which ease a particle placed inside another body out at a bounded speed, let such
+/// particles out faster than that.
+pub(crate) fn surface_distance(
+    xp: Vec3,
+    corners: [Vec3; 3],
+    dents: bool,
+) -> Option<(f32, Vec3, Vec3)> {
+    let [a, b, c] = corners;
+    let n = (b - a).cross(c - a).try_normalize()?;
+    let q = closest_barycentric(xp, a, b, c);
+    let offset = xp - (a * q.x + b * q.y + c * q.z);
+    let distance = offset.length();
+    let over = (offset - n * offset.dot(n)).length_squared() <= 1e-12 * (1.0 + distance);
+    if over {
+        return Some((offset.dot(n), n, q));
+    }
+    if dents && offset.dot(n) < 0.0 {
+        return Some((-distance, -offset / distance, q));
+    }
+    Some((f32::INFINITY, n, q))
+}
+
+/// Whether `x` is outside the plane of the triangle `corners` (or within `thickness` of it):
+/// where a particle was before it moved decides whether a deep one came through the surface
+/// or lies past the far side of a thin part.
+pub(crate) fn outside_of(x: Vec3, corners: [Vec3; 3], thickness: f32) -> bool {
+    let [a, b, c] = corners;
+    (x - a).dot((b - a).cross(c - a).normalize_or_zero()) > -thickness
+}
+
+/// How squarely a triangle may face the static collider a particle rests on and still push
+/// it out (the cosine of the angle between the triangle's outward normal and the collider's
+/// inward one).
+const FACING_COLLIDER: f32 = 0.5;
+
+/// Whether the triangle `tri` (corners at `corner(j)`) faces into the static collider whose
+/// outward normal is `resting_on` (zero: none): a particle on the ground can be past such a
+/// triangle only when it is wedged inside the triangle's body from the side (two bodies
+/// pressed together at their feet), and pushing it out through that triangle drives it into
+/// the ground, which throws it back every substep: it must leave through another triangle.
+pub(crate) fn faces_into(resting_on: Vec3, tri: [u32; 3], corner: impl Fn(usize) -> Vec3) -> bool {
+    if resting_on == Vec3::ZERO {
+        return false;
+    }
+    let [a, b, c] = tri.map(|j| corner(j as usize));
+    (b - a).cross(c - a).normalize_or_zero().dot(resting_on) < -FACING_COLLIDER
+}
+
+/// The triangle of `triangles` (corners at `corner(j)`) that `near` lists and is nearest
+/// `xp`, skipping those `skip` rejects.
+pub(crate) fn nearest_triangle(
+    xp: Vec3,
+    near: impl FnOnce(&mut dyn FnMut(u32)),
+    triangles: &[[u32; 3]],
+    corner: impl Fn(usize) -> Vec3,
+    mut skip: impl FnMut([u32; 3]) -> bool,
+) -> Option<[usize; 3]> {
+    // Nearest first; among triangles as near (sharing the nearest edge or corner), the one
+    // the particle lies most squarely over, so that a particle over the top face next to its
+    // edge is met by the top face, not by the side face below the same edge, whichever the
+    // grid lists first.
+    // How squarely `xp` lies over the triangle with corners `end` whose closest point is at
+    // `offset` from it: computed only where two triangles are as near.
+    let squarely = |end: &[Vec3; 3], offset: Vec3| {
+        let normal = (end[1] - end[0]).cross(end[2] - end[0]).normalize_or_zero();
+        offset.normalize_or_zero().dot(normal).abs()
+    };
+    let mut nearest: Option<([usize; 3], [Vec3; 3], Vec3, f32)> = None;
+    near(&mut |k| {
+        let tri = triangles[k as usize];
+        if skip(tri) {
+            return;
+        }
+        let corners = tri.map(|j| j as usize);
+        let end = corners.map(&corner);
+        // Bounds further than the nearest so far (past the tie margin): neither nearer nor tied.
+        if nearest.is_some_and(|(.., best)| bounds_beyond(xp, &end, best)) {
+            return;
+        }
+        let q = closest_barycentric(xp, end[0], end[1], end[2]);
+        let offset = xp - (end[0] * q.x + end[1] * q.y + end[2] * q.z);
+        let distance = offset.length_squared();
+        let better = nearest.is_none_or(|(_, best_end, best_offset, best)| {
+            let tie = 1e-6 * best.max(distance) + 1e-14;
+            distance < best - tie
+                || (distance <= best + tie
+                    && squarely(&end, offset) > squarely(&best_end, best_offset))
+        });
+        if better {
+            nearest = Some((corners, end, offset, distance));
+        }
+    });
+    nearest.map(|(corners, ..)| corners)
 }
 
 /// Whether the bounds of the triangle with corners `end` are further from `x` than `best`

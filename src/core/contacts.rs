@@ -168,6 +168,10 @@ pub(crate) struct ContactState {
     /// contact pass (zero when it touched none) and the pair's friction: what
     /// `support_friction` shares the ground's push out by.
     pub(crate) static_contact: Vec<[f32; 2]>,
+    /// Per particle, the outward normal of the static collider it touched in the last contact
+    /// pass (zero: none): a soft contact does not push it into that collider
+    /// (`soft_contacts.rs`).
+    pub(crate) static_normals: Vec<Vec3>,
     /// Per particle, where static friction holds it on a rigid body's collider (see
     /// `rigid_friction`); `RigidAnchor::NONE` if it touched none in the last rigid contact pass.
     pub(crate) rigid_anchors: Vec<RigidAnchor>,
@@ -188,6 +192,7 @@ impl ContactState {
             sphere: vec![u32::MAX; n],
             touching: Vec::with_capacity(n),
             static_contact: vec![[0.0; 2]; n],
+            static_normals: vec![Vec3::ZERO; n],
             rigid_anchors: vec![RigidAnchor::NONE; n],
             rigid_held: Vec::with_capacity(n),
             rigid_touched: vec![false; n],
@@ -325,6 +330,7 @@ impl ContactBody<'_> {
         let sphere = unsafe { SharedSlice::new(&mut self.contacts.sphere) };
         let anchors = unsafe { SharedSlice::new(&mut self.contacts.anchors) };
         let static_contact = unsafe { SharedSlice::new(&mut self.contacts.static_contact) };
+        let static_normals = unsafe { SharedSlice::new(&mut self.contacts.static_normals) };
         in_particle_chunks(parallel, self.chunk_findings, n, |found, particles| {
             for i in particles {
                 if inv_masses[i] == 0.0 {
@@ -335,6 +341,7 @@ impl ContactBody<'_> {
                 // surface faces another way than the last one's.
                 let mut other = (0.0f32, Vec3::ZERO);
                 static_contact.set(i, [0.0; 2]);
+                static_normals.set(i, Vec3::ZERO);
                 for c in colliders {
                     if !filter.interacts_with(c.filter) {
                         continue;
@@ -358,6 +365,7 @@ impl ContactBody<'_> {
                     velocities.set(i, v);
                     anchors.set(i, anchor);
                     static_contact.set(i, [depth, mu]);
+                    static_normals.set(i, normal);
                     // As `ContactState::record`, with the new ones listed by the job.
                     if normals.get(i) == Vec3::ZERO {
                         found.new_touching.push(i as u32);

@@ -28,7 +28,7 @@ use super::soft_records::SoftAnchor;
 use super::tet_mesh::TetMesh;
 
 /// The version of [`StateSnapshot`]'s layout; a snapshot of another is refused.
-pub const SNAPSHOT_VERSION: u32 = 2;
+pub const SNAPSHOT_VERSION: u32 = 3;
 
 /// What a snapshot says of its body's tet mesh: its size and a hash of its tets and rest
 /// positions (FNV-1a over their bits: the same on every machine and Rust version, which the
@@ -90,6 +90,8 @@ pub struct StateSnapshot {
     pub(crate) friction_anchors: Vec<Option<Vec3>>,
     /// Per particle: the last contact pass's depth and friction in a static collider.
     pub(crate) static_contact: Vec<[f32; 2]>,
+    /// Per particle: the outward normal of the static collider it touched in that pass.
+    pub(crate) static_normals: Vec<Vec3>,
     /// Per particle: where static friction holds it on another soft body.
     pub(crate) soft_anchors: Vec<SoftAnchor>,
     /// Per particle: where static friction holds it on a rigid body's collider (the collider
@@ -220,6 +222,7 @@ impl StateSnapshot {
             self.velocities.len(),
             self.friction_anchors.len(),
             self.static_contact.len(),
+            self.static_normals.len(),
             self.soft_anchors.len(),
             self.rigid_anchors.len(),
         ];
@@ -235,6 +238,9 @@ impl StateSnapshot {
         }
         if !finite(&self.velocities) {
             return damaged("a velocity is not finite");
+        }
+        if !finite(&self.static_normals) {
+            return damaged("a contact normal is not finite");
         }
         if !self.spring_rest.iter().all(|l| l.is_finite() && *l >= 0.0) {
             return damaged("a spring's rest length is not a length");

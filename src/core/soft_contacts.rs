@@ -34,7 +34,8 @@ use parry3d::bounding_volume::{Aabb, BoundingVolume};
 
 use super::body::SoftBodyState;
 use super::boundary::{
-    Boundary, CandidateParticle, SoftCandidates, TriangleGrid, bounds_beyond, closest_barycentric,
+    Boundary, CandidateParticle, SoftCandidates, TriangleGrid, closest_barycentric, faces_into,
+    nearest_triangle, outside_of, surface_distance,
 };
 use super::colliders::combined_friction;
 use super::contacts::{ContactState, MAX_DEPENETRATION_SPEED};
@@ -113,21 +114,32 @@ fn record_soft_corners(
 struct Arrays<'a> {
     x: SharedSlice<'a, Vec3>,
     v: SharedSlice<'a, Vec3>,
-    w: &'a [f32],
+    inv_masses: &'a [f32],
+    /// Whether the body stands still in this pass (see [`frozen`]): its particles then
+    /// weigh as a static collider's.
+    frozen: bool,
     /// Where each particle started the substep (for [`SoftContactPhase::Substep`]).
     start: &'a [Point4],
     anchors: SharedSlice<'a, SoftAnchor>,
     pass: u32,
+    /// Per particle, the outward normal of the static collider it rests on (zero: none).
+    resting_on: &'a [Vec3],
 }
 
 impl<'a> Arrays<'a> {
+    /// Particle `i`'s inverse mass in this pass.
+    fn w(&self, i: usize) -> f32 {
+        if self.frozen { 0.0 } else { self.inv_masses[i] }
+    }
+
     fn new(
         x: &'a mut [Vec3],
         v: &'a mut [Vec3],
-        w: &'a [f32],
+        (inv_masses, frozen): (&'a [f32], bool),
         start: &'a [Point4],
         anchors: &'a mut [SoftAnchor],
         pass: u32,
+        resting_on: &'a [Vec3],
     ) -> Self {
         // SAFETY: the narrow phase runs on this thread alone, reading and writing one element
         // at a time and holding no reference into the slices.
@@ -135,10 +147,12 @@ impl<'a> Arrays<'a> {
             Arrays {
                 x: SharedSlice::new(x),
                 v: SharedSlice::new(v),
-                w,
+                inv_masses,
+                frozen,
                 start,
                 anchors: SharedSlice::new(anchors),
                 pass,
+                resting_on,
             }
         }
     }
@@ -236,28 +250,35 @@ fn resolve_pair(
     let (Some(sa), Some(sb)) = (a.soft_contacts, b.soft_contacts) else {
         return 0;
     };
-    // Two bodies asleep are left alone, but for the pass that ends the step they fell asleep in.
+    // Two bodies asleep are left alone, but for the pass that ends the step they fell asleep
+    // in; so are two standing still.
     let dozing = |body: &SoftBodyState| body.is_sleeping() && !body.sleep.fell_asleep_now;
-    if (dozing(a) && dozing(b)) || !a.collision_filter.interacts_with(b.collision_filter) {
+    if (dozing(a) && dozing(b))
+        || (frozen(a, phase) && frozen(b, phase))
+        || !a.collision_filter.interacts_with(b.collision_filter)
+    {
         return 0;
     }
     let thickness = sa.thickness.max(sb.thickness);
     let mu = combined_friction(a.material.friction, b.material.friction);
+    let (frozen_a, frozen_b) = (frozen(a, phase), frozen(b, phase));
     let pa = Arrays::new(
         &mut a.positions,
         &mut a.velocities,
-        &a.inv_masses,
+        (&a.inv_masses, frozen_a),
         &a.scratch.predicted,
         &mut a.scratch.soft_anchors,
         a.scratch.soft_pass,
+        &a.contacts.static_normals,
     );
     let pb = Arrays::new(
         &mut b.positions,
         &mut b.velocities,
-        &b.inv_masses,
+        (&b.inv_masses, frozen_b),
         &b.scratch.predicted,
         &mut b.scratch.soft_anchors,
         b.scratch.soft_pass,
+        &b.contacts.static_normals,
     );
     let (ba, bb) = (&a.boundary, &b.boundary);
     let (ta, tb) = (&mut a.scratch.soft_touched, &mut b.scratch.soft_touched);
@@ -323,6 +344,20 @@ fn resolve_pair(
     contacts
 }
 
+/// Whether `body` stands still in a pass of `phase`, as a static collider would: in a substep's
+/// pass, a body that does not run this step's substeps (it was asleep when they were planned;
+/// moved by the others' contacts with no solve of its own, it was squeezed 1 % out of its
+/// volume in a step); in the pass that ends a step, a body asleep but for the one it fell
+/// asleep in (whose last contacts that pass still meets). Two such bodies are left alone;
+/// one touched by a body that moves is stirred, and runs the next step.
+fn frozen(body: &SoftBodyState, phase: SoftContactPhase) -> bool {
+    match phase {
+        SoftContactPhase::Substep(_) => body.scratch.substep_plan.is_none(),
+        SoftContactPhase::Final => body.is_sleeping() && !body.sleep.fell_asleep_now,
+        SoftContactPhase::Predicted(_) => false,
+    }
+}
+
 /// How a pair's pass finds `from`'s particles near `to`'s triangles (in slot `partner`): in
 /// `to`'s grid within the pair's overlap `region` grown by `thickness`, or, without a region,
 /// from `from`'s candidates.
@@ -358,10 +393,11 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
     let arrays = Arrays::new(
         &mut body.positions,
         &mut body.velocities,
-        &body.inv_masses,
+        (&body.inv_masses, false),
         &body.scratch.predicted,
         &mut body.scratch.soft_anchors,
         body.scratch.soft_pass,
+        &body.contacts.static_normals,
     );
     let contact = Contact {
         phase,
@@ -419,31 +455,6 @@ struct Touch {
     w_t: f32,
 }
 
-/// The signed distance of `xp` past the triangle `corners` (negative inside), the direction
-/// that takes it out, and the barycentric weights of its nearest point; `None` for a
-/// degenerate triangle. Over the triangle, the distance along its outward normal. Nearest to
-/// one of its edges or corners, the particle is outside (infinitely far: another triangle
-/// decides) unless it lies behind the triangle's plane: then it is inside a dent (a concave
-/// edge or corner, as an impact leaves) or under the edge between two triangles of a flat
-/// face, and comes out to that nearest point. Only with `dents` (the final pass): the
-/// substeps, which ease a particle placed inside another body out at a bounded speed, let such
-/// particles out faster than that.
-fn surface_distance(xp: Vec3, corners: [Vec3; 3], dents: bool) -> Option<(f32, Vec3, Vec3)> {
-    let [a, b, c] = corners;
-    let n = (b - a).cross(c - a).try_normalize()?;
-    let q = closest_barycentric(xp, a, b, c);
-    let offset = xp - (a * q.x + b * q.y + c * q.z);
-    let distance = offset.length();
-    let over = (offset - n * offset.dot(n)).length_squared() <= 1e-12 * (1.0 + distance);
-    if over {
-        return Some((offset.dot(n), n, q));
-    }
-    if dents && offset.dot(n) < 0.0 {
-        return Some((-distance, -offset / distance, q));
-    }
-    Some((f32::INFINITY, n, q))
-}
-
 /// The part of a predicted penetration `depth` to remove within a step of `h`: all that the
 /// motion adds, and the penetration `existing` before it at most at
 /// [`MAX_DEPENETRATION_SPEED`], so that a particle already deep in a body is eased out rather
@@ -453,61 +464,6 @@ fn bounded_correction(depth: f32, existing: f32, h: f32) -> f32 {
     depth
         .min(depth - existing + MAX_DEPENETRATION_SPEED * h)
         .max(0.0)
-}
-
-/// Whether `x` is outside the plane of the triangle `corners` (or within `thickness` of it):
-/// where a particle was before it moved decides whether a deep one came through the surface
-/// or lies past the far side of a thin part.
-fn outside_of(x: Vec3, corners: [Vec3; 3], thickness: f32) -> bool {
-    let [a, b, c] = corners;
-    (x - a).dot((b - a).cross(c - a).normalize_or_zero()) > -thickness
-}
-
-/// The triangle of `triangles` (corners at `corner(j)`) that `near` lists and is nearest
-/// `xp`, skipping those `skip` rejects.
-fn nearest_triangle(
-    xp: Vec3,
-    near: impl FnOnce(&mut dyn FnMut(u32)),
-    triangles: &[[u32; 3]],
-    corner: impl Fn(usize) -> Vec3,
-    mut skip: impl FnMut([u32; 3]) -> bool,
-) -> Option<[usize; 3]> {
-    // Nearest first; among triangles as near (sharing the nearest edge or corner), the one
-    // the particle lies most squarely over, so that a particle over the top face next to its
-    // edge is met by the top face, not by the side face below the same edge, whichever the
-    // grid lists first.
-    // How squarely `xp` lies over the triangle with corners `end` whose closest point is at
-    // `offset` from it: computed only where two triangles are as near.
-    let squarely = |end: &[Vec3; 3], offset: Vec3| {
-        let normal = (end[1] - end[0]).cross(end[2] - end[0]).normalize_or_zero();
-        offset.normalize_or_zero().dot(normal).abs()
-    };
-    let mut nearest: Option<([usize; 3], [Vec3; 3], Vec3, f32)> = None;
-    near(&mut |k| {
-        let tri = triangles[k as usize];
-        if skip(tri) {
-            return;
-        }
-        let corners = tri.map(|j| j as usize);
-        let end = corners.map(&corner);
-        // Bounds further than the nearest so far (past the tie margin): neither nearer nor tied.
-        if nearest.is_some_and(|(.., best)| bounds_beyond(xp, &end, best)) {
-            return;
-        }
-        let q = closest_barycentric(xp, end[0], end[1], end[2]);
-        let offset = xp - (end[0] * q.x + end[1] * q.y + end[2] * q.z);
-        let distance = offset.length_squared();
-        let better = nearest.is_none_or(|(_, best_end, best_offset, best)| {
-            let tie = 1e-6 * best.max(distance) + 1e-14;
-            distance < best - tie
-                || (distance <= best + tie
-                    && squarely(&end, offset) > squarely(&best_end, best_offset))
-        });
-        if better {
-            nearest = Some((corners, end, offset, distance));
-        }
-    });
-    nearest.map(|(corners, ..)| corners)
 }
 
 /// A pass's contact rule.
@@ -539,7 +495,7 @@ impl Contact {
         // face near its edge is outside the body, whatever the side face's plane says.
         let mut meet = |i: usize, corners: Option<[usize; 3]>| {
             if let Some(corners) = corners
-                && let Some(n) = self.resolve(i, p.w[i], p, corners, t, reach)
+                && let Some(n) = self.resolve(i, p.w(i), p, corners, t, reach)
             {
                 touched.push((i as u32, n));
                 contacts += 1;
@@ -552,7 +508,8 @@ impl Contact {
                     let xp = p.x.get(i) + ahead * p.v.get(i);
                     let listed = candidates.triangles_of(particle);
                     let near = |visit: &mut dyn FnMut(u32)| listed.iter().for_each(|&k| visit(k));
-                    meet(i, nearest_triangle(xp, near, triangles, corner, |_| false));
+                    let blocked = |tri: [u32; 3]| faces_into(p.resting_on[i], tri, corner);
+                    meet(i, nearest_triangle(xp, near, triangles, corner, blocked));
                 }
             }
             Near::Grid {
@@ -569,18 +526,19 @@ impl Contact {
                     if !swept.intersects(&region) {
                         continue;
                     }
-                    let self_skip = |tri: [u32; 3]| {
-                        rest.is_some_and(|rest| {
-                            if tri.contains(&(i as u32)) {
-                                return true;
-                            }
-                            let [a, b, c] = tri.map(|j| rest[j as usize]);
-                            let q = closest_barycentric(rest[i], a, b, c);
-                            (a * q.x + b * q.y + c * q.z).distance(rest[i]) < 2.0 * reach
-                        })
+                    let skip = |tri: [u32; 3]| {
+                        faces_into(p.resting_on[i], tri, corner)
+                            || rest.is_some_and(|rest| {
+                                if tri.contains(&(i as u32)) {
+                                    return true;
+                                }
+                                let [a, b, c] = tri.map(|j| rest[j as usize]);
+                                let q = closest_barycentric(rest[i], a, b, c);
+                                (a * q.x + b * q.y + c * q.z).distance(rest[i]) < 2.0 * reach
+                            })
                     };
                     let near = |visit: &mut dyn FnMut(u32)| grid.for_each_near(&swept, visit);
-                    meet(i, nearest_triangle(xp, near, triangles, corner, self_skip));
+                    meet(i, nearest_triangle(xp, near, triangles, corner, skip));
                 }
             }
         }
@@ -609,7 +567,7 @@ impl Contact {
         if d >= thickness || (d < -reach && !was_outside) {
             return None;
         }
-        let w_t: f32 = (0..3).map(|k| q[k] * q[k] * t.w[corners[k]]).sum();
+        let w_t: f32 = (0..3).map(|k| q[k] * q[k] * t.w(corners[k])).sum();
         let w = w_p + w_t;
         if w == 0.0 {
             return None;
@@ -669,7 +627,7 @@ impl Contact {
             p.x.set(i, p.x.get(i) + k_shift * w_p);
             for k in 0..3 {
                 let j = corners[k];
-                t.x.set(j, t.x.get(j) - k_shift * (q[k] * t.w[j]));
+                t.x.set(j, t.x.get(j) - k_shift * (q[k] * t.w(j)));
             }
         };
         moved(n * shift);
@@ -682,7 +640,10 @@ impl Contact {
         // The corners are checked: an anchor may come from a restored snapshot.
         let anchored = anchor.partner == self.partner
             && anchor.pass.saturating_add(1) >= p.pass
-            && anchor.corners.iter().all(|&c| (c as usize) < t.w.len());
+            && anchor
+                .corners
+                .iter()
+                .all(|&c| (c as usize) < t.inv_masses.len());
         let mut held_fully = false;
         if anchored {
             // Static friction: back on the anchor if it is within reach.
@@ -756,7 +717,7 @@ impl Contact {
             p.v.set(i, p.v.get(i) + impulse * w_p);
             for k in 0..3 {
                 let j = corners[k];
-                t.v.set(j, t.v.get(j) - impulse * (q[k] * t.w[j]));
+                t.v.set(j, t.v.get(j) - impulse * (q[k] * t.w(j)));
             }
         };
         let relative = || p.v.get(i) - (0..3).map(|k| q[k] * t.v.get(corners[k])).sum::<Vec3>();
@@ -773,7 +734,7 @@ impl Contact {
                 p.x.set(i, p.x.get(i) + n * (shift * w_p));
                 for k in 0..3 {
                     let j = corners[k];
-                    t.x.set(j, t.x.get(j) - n * (shift * q[k] * t.w[j]));
+                    t.x.set(j, t.x.get(j) - n * (shift * q[k] * t.w(j)));
                 }
                 let approach = relative().dot(n);
                 let lambda = (-approach / w).max(0.0);
