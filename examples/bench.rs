@@ -449,7 +449,13 @@ fn main() {
     // high), dropped in two layers, over their first 3 s: meeting each other
     // (`jellies_16_pile`), and passing through each other (`jellies_16_pile_apart`, their soft
     // contacts off), which is what the contacts cost.
-    for (name, contacts) in [("jellies_16_pile", true), ("jellies_16_pile_apart", false)] {
+    // Over 10 s too (`_10s`): the pile settles and falls asleep.
+    for (name, contacts, steps) in [
+        ("jellies_16_pile", true, 180),
+        ("jellies_16_pile_apart", false, 180),
+        ("jellies_16_pile_10s", true, 600),
+        ("jellies_16_pile_apart_10s", false, 600),
+    ] {
         if !wanted(name) {
             continue;
         }
@@ -458,7 +464,7 @@ fn main() {
             &args,
             name,
             &game_methods,
-            (180, 1, 60.0),
+            (steps, 1, 60.0),
             |world, method| {
                 for k in 0..16 {
                     let (i, j, layer) = (k % 3, (k / 3) % 3, k / 9);
