@@ -268,9 +268,6 @@ impl Listed<'_> {
 pub(crate) struct CandidatePaths {
     pub(crate) start: Vec<Vec3>,
     pub(crate) radius: Vec<f32>,
-    /// Whether a particle went past its radius: its candidates are being found anew within
-    /// the step (`soft_broad_phase::renew_soft_candidates`).
-    pub(crate) lost: bool,
 }
 
 impl SoftCandidates {
@@ -320,14 +317,6 @@ impl SoftCandidates {
         });
         if let Some(list) = self.lists.last_mut() {
             list.end = self.particles.len() as u32;
-        }
-    }
-
-    /// Drops the list against `partner`, if any, for a new one to be begun (its particles and
-    /// triangles stay in the arrays until the next [`SoftCandidates::clear`]).
-    pub(crate) fn retire(&mut self, partner: u32) {
-        for list in self.lists.iter_mut().filter(|l| l.partner == partner) {
-            list.partner = u32::MAX;
         }
     }
 

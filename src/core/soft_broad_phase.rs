@@ -87,7 +87,11 @@ pub(crate) fn gather_soft_candidates<B: DerefMut<Target = SoftBodyState> + Send>
     parallel: &dyn Parallel,
 ) {
     for_each_mut(bodies, parallel, &|body| start_paths(body, h));
-    rounds.plan(bodies, |one, other, _| may_meet(one, other));
+    rounds.plan(bodies, |one, other, _| {
+        overlap(one, other).is_some()
+            && !(one.is_sleeping() && other.is_sleeping())
+            && one.collision_filter.interacts_with(other.collision_filter)
+    });
     rounds.run(bodies, parallel, &|one, other, [a, b]| {
         match other {
             None => gather_self(one, a),
@@ -100,65 +104,6 @@ pub(crate) fn gather_soft_candidates<B: DerefMut<Target = SoftBodyState> + Send>
         }
         0
     });
-}
-
-/// Finds the candidates again for the `h` seconds left of the step where they no longer
-/// hold ([`candidates_hold`]): a body a particle of which went past its radius gets new paths
-/// and lists; the bodies it may meet list their particles near it anew (on their paths as
-/// they are: their particles are still within their radii); the lists between two bodies that
-/// both hold are kept, since neither's particles nor triangles left the radii they were found
-/// for. A fast impact in a pile then renews the lists about the bodies it moved, not the whole
-/// pile's.
-pub(crate) fn renew_soft_candidates<B: DerefMut<Target = SoftBodyState> + Send>(
-    bodies: &mut [B],
-    h: f32,
-    rounds: &mut PairRounds,
-    parallel: &dyn Parallel,
-) {
-    let mut any = false;
-    for body in bodies.iter_mut() {
-        body.boundary.paths.lost = !candidates_hold(body);
-        any |= body.boundary.paths.lost;
-    }
-    if !any {
-        return;
-    }
-    for_each_mut(bodies, parallel, &|body| {
-        if body.boundary.paths.lost {
-            start_paths(body, h);
-        }
-    });
-    let lost = |body: &SoftBodyState| body.boundary.paths.lost;
-    rounds.plan(bodies, |one, other, _| {
-        (lost(one) || lost(other)) && may_meet(one, other)
-    });
-    rounds.run(bodies, parallel, &|one, other, [a, b]| {
-        match other {
-            None if lost(one) => gather_self(one, a),
-            None => {}
-            Some(other) => {
-                if let Some(region) = overlap(one, other) {
-                    // Either lost: each side's list against the other is found anew (a body
-                    // whose paths are new has none; one that kept its lists replaces it).
-                    if lost(one) || lost(other) {
-                        one.boundary.candidates.retire(b);
-                        gather_pair(one, other, &region, b);
-                        other.boundary.candidates.retire(a);
-                        gather_pair(other, one, &region, a);
-                    }
-                }
-            }
-        }
-        0
-    });
-}
-
-/// Whether two bodies' step candidates are to be found: their bounds overlap, one is awake,
-/// and their filters let them meet.
-fn may_meet(one: &SoftBodyState, other: &SoftBodyState) -> bool {
-    overlap(one, other).is_some()
-        && !(one.is_sleeping() && other.is_sleeping())
-        && one.collision_filter.interacts_with(other.collision_filter)
 }
 
 /// Where the prepared bounds (`Boundary::reach`) of two bodies overlap, if they do.
@@ -489,9 +434,12 @@ mod tests {
         v / v.length().max(1.0)
     }
 
-    /// Two jellies 0.3 m apart moving into each other at 1.5 m/s (give or take 0.5), their
-    /// candidates found for a step at 60 Hz.
-    fn approaching() -> [SoftBodyState; 2] {
+    /// Two jellies moving into each other: after their candidates are found, every particle is
+    /// moved anywhere within its radius, and every particle that then lies within the pair's
+    /// gap of a triangle of the other body has that triangle among its candidates; a particle
+    /// moved past its radius makes the candidates no longer hold.
+    #[test]
+    fn the_candidates_list_every_triangle_within_reach_while_they_hold() {
         let mut bodies = [jelly(Vec3::ZERO), jelly(Vec3::new(0.29, 0.02, 0.01))];
         for (k, v) in bodies[0].velocities.iter_mut().enumerate() {
             *v = Vec3::X * 1.5 + scatter(k as u32) * 0.5;
@@ -499,31 +447,24 @@ mod tests {
         for (k, v) in bodies[1].velocities.iter_mut().enumerate() {
             *v = -Vec3::X * 1.5 + scatter(7_919 + k as u32) * 0.5;
         }
+        let h = 1.0 / 60.0;
         let mut refs: Vec<&mut SoftBodyState> = bodies.iter_mut().collect();
         gather_soft_candidates(
             &mut refs,
-            1.0 / 60.0,
+            h,
             &mut PairRounds::default(),
             &crate::core::Serial,
         );
-        bodies
-    }
-
-    /// Moves each boundary particle of `body` somewhere within `share` of its radius of where
-    /// its candidates start (`seed` picks where).
-    fn move_within(body: &mut SoftBodyState, share: f32, seed: u32) {
-        let paths = body.boundary.paths.clone();
-        for (n, &i) in body.boundary.particles.iter().enumerate() {
-            let i = i as usize;
-            let out = scatter(31 * n as u32 + seed);
-            body.positions[i] = paths.start[i] + out * (share * paths.radius[i]);
-        }
-    }
-
-    /// Every particle of either body that lies within the pair's gap of a triangle of the
-    /// other has that triangle among its candidates. Returns how many did.
-    fn every_triangle_within_reach_listed(bodies: &[SoftBodyState; 2]) -> usize {
         let gap = gap(&bodies[0], &bodies[1]);
+        for (b, body) in bodies.iter_mut().enumerate() {
+            let paths = body.boundary.paths.clone();
+            for (n, &i) in body.boundary.particles.iter().enumerate() {
+                let i = i as usize;
+                let out = scatter(31 * n as u32 + b as u32);
+                body.positions[i] = paths.start[i] + out * (0.999 * paths.radius[i]);
+            }
+            assert!(candidates_hold(body));
+        }
         let mut met = 0;
         for (a, b) in [(0, 1), (1, 0)] {
             let (one, other) = (&bodies[a], &bodies[b]);
@@ -548,21 +489,6 @@ mod tests {
                 }
             }
         }
-        met
-    }
-
-    /// Two jellies moving into each other: after their candidates are found, every particle is
-    /// moved anywhere within its radius, and every particle that then lies within the pair's
-    /// gap of a triangle of the other body has that triangle among its candidates; a particle
-    /// moved past its radius makes the candidates no longer hold.
-    #[test]
-    fn the_candidates_list_every_triangle_within_reach_while_they_hold() {
-        let mut bodies = approaching();
-        for (b, body) in bodies.iter_mut().enumerate() {
-            move_within(body, 0.999, b as u32);
-            assert!(candidates_hold(body));
-        }
-        let met = every_triangle_within_reach_listed(&bodies);
         assert!(
             met > 20,
             "only {met} particles came within the gap: the test moved too little"
@@ -571,53 +497,5 @@ mod tests {
         let paths = bodies[0].boundary.paths.clone();
         bodies[0].positions[i] = paths.start[i] + Vec3::Y * (1.01 * paths.radius[i]);
         assert!(!candidates_hold(&bodies[0]));
-    }
-
-    /// A body whose particles went past their radii gets new paths, and the lists about it
-    /// are renewed while the other body keeps its paths: with the first body's particles
-    /// anywhere within their new radii and the other's within their old ones, every triangle
-    /// within the gap is listed both ways.
-    #[test]
-    fn renewed_candidates_list_every_triangle_within_reach() {
-        let mut bodies = approaching();
-        // Body 0 goes on past its radii towards body 1 (as an impact throws it).
-        let paths = bodies[0].boundary.paths.clone();
-        for &i in &bodies[0].boundary.particles {
-            let i = i as usize;
-            bodies[0].positions[i] = paths.start[i] + Vec3::X * (1.5 * paths.radius[i]);
-        }
-        move_within(&mut bodies[1], 0.5, 4);
-        let i = bodies[0].boundary.particles[7] as usize;
-        let kept_start = bodies[1].boundary.paths.start.clone();
-        let mut refs: Vec<&mut SoftBodyState> = bodies.iter_mut().collect();
-        let h = 0.5 / 60.0;
-        renew_soft_candidates(
-            &mut refs,
-            h,
-            &mut PairRounds::default(),
-            &crate::core::Serial,
-        );
-        assert_eq!(bodies[0].boundary.paths.start[i], bodies[0].positions[i]);
-        assert_eq!(bodies[1].boundary.paths.start, kept_start);
-        // Body 1's list against body 0 is what a search from its paths as they are finds
-        // among body 0's triangles where they are now, not the one found before.
-        let listed = |body: &SoftBodyState, partner: u32| -> Vec<(u32, Vec<u32>)> {
-            let c = &body.boundary.candidates;
-            c.against(partner)
-                .iter()
-                .map(|p| (p.particle, c.triangles_of(p).to_vec()))
-                .collect()
-        };
-        let mut fresh = bodies[1].clone();
-        fresh.boundary.candidates.clear();
-        let region = overlap(&fresh, &bodies[0]).expect("they meet");
-        gather_pair(&mut fresh, &bodies[0], &region, 0);
-        assert_eq!(listed(&bodies[1], 0), listed(&fresh, 0));
-        // Body 1's particles may still go anywhere within their radii of where they started.
-        move_within(&mut bodies[0], 0.999, 5);
-        move_within(&mut bodies[1], 0.999, 6);
-        assert!(bodies.iter().all(candidates_hold));
-        let met = every_triangle_within_reach_listed(&bodies);
-        assert!(met > 20, "only {met} particles came within the gap");
     }
 }
