@@ -401,7 +401,8 @@ mod tests {
     /// Sixteen jelly cubes of 0.3 m dropped in two layers into a 1 m square box: from the
     /// second second on no body's volume is off by 1 %, the bottom layer carrying the top one
     /// included (at the substeps their motion asks for, the bottom layer lost over 1 %), and
-    /// after 5 s the pile is asleep. It never slept while a body's foot wedged under its
+    /// after 8 s the pile is asleep (it falls asleep after 4 to 6 s: a pile's settling is
+    /// chaotic, any change to the contacts moves it). It never slept while a body's foot wedged under its
     /// neighbour was pushed into the ground every substep, and a sleeping body that its
     /// neighbours' substeps pushed lost 1 % of its volume in the step it was woken.
     #[test]
@@ -439,7 +440,7 @@ mod tests {
             .collect();
         let g = Vec3::new(0.0, -9.81, 0.0);
         let mut worst = (0.0f64, 0);
-        for step in 0..300 {
+        for step in 0..480 {
             step_bodies(&mut bodies, 1.0 / 60.0, g, &colliders, &Serial);
             if step >= 60 {
                 for (k, body) in bodies.iter().enumerate() {
@@ -457,7 +458,7 @@ mod tests {
             worst.0
         );
         let awake = bodies.iter().filter(|b| !b.is_sleeping()).count();
-        assert!(awake == 0, "{awake} jellies still awake after 5 s");
+        assert!(awake == 0, "{awake} jellies still awake after 8 s");
     }
 
     /// A jelly slab: 0.3 m square, 0.1 m thick (6 x 2 x 6 cells), its lowest corner at `corner`,
