@@ -490,6 +490,11 @@ impl Contact {
     ) -> u32 {
         let ahead = self.phase.ahead();
         let corner = |j: usize| t.x.get(j) + ahead * t.v.get(j);
+        // Triangles facing into the collider a particle rests on are skipped in the passes
+        // that ease a particle out at a bounded speed; the final pass, which moves it out
+        // whole, would move it through the next triangle, maybe across the other body's thin
+        // part (a jelly dragon's pile 11 times its volume for a step): it leaves it.
+        let resting = self.phase != SoftContactPhase::Final;
         let mut contacts = 0;
         // The nearest triangle decides, as a signed distance would: a particle over the top
         // face near its edge is outside the body, whatever the side face's plane says.
@@ -508,7 +513,8 @@ impl Contact {
                     let xp = p.x.get(i) + ahead * p.v.get(i);
                     let listed = candidates.triangles_of(particle);
                     let near = |visit: &mut dyn FnMut(u32)| listed.iter().for_each(|&k| visit(k));
-                    let blocked = |tri: [u32; 3]| faces_into(p.resting_on[i], tri, corner);
+                    let blocked =
+                        |tri: [u32; 3]| resting && faces_into(p.resting_on[i], tri, corner);
                     meet(i, nearest_triangle(xp, near, triangles, corner, blocked));
                 }
             }
@@ -527,7 +533,7 @@ impl Contact {
                         continue;
                     }
                     let skip = |tri: [u32; 3]| {
-                        faces_into(p.resting_on[i], tri, corner)
+                        (resting && faces_into(p.resting_on[i], tri, corner))
                             || rest.is_some_and(|rest| {
                                 if tri.contains(&(i as u32)) {
                                     return true;
@@ -538,7 +544,12 @@ impl Contact {
                             })
                     };
                     let near = |visit: &mut dyn FnMut(u32)| grid.for_each_near(&swept, visit);
-                    meet(i, nearest_triangle(xp, near, triangles, corner, skip));
+                    let found = nearest_triangle(xp, near, triangles, corner, skip);
+                    // The final pass leaves alone a particle whose nearest triangle faces
+                    // into its collider: the substeps ease it out through another.
+                    let into =
+                        |c: &[usize; 3]| faces_into(p.resting_on[i], c.map(|j| j as u32), corner);
+                    meet(i, found.filter(|c| resting || !into(c)));
                 }
             }
         }
