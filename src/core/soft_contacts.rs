@@ -346,8 +346,7 @@ fn resolve_pair(
 
 /// Whether `body` stands still in a pass of `phase`, as a static collider would: in a substep's
 /// pass, a body that does not run this step's substeps (it was asleep when they were planned;
-/// moved by the others' contacts with no solve of its own, it was squeezed 1 % out of its
-/// volume in a step); in the pass that ends a step, a body asleep but for the one it fell
+/// moved by the others' contacts with no solve of its own, it would lose volume); in the pass that ends a step, a body asleep but for the one it fell
 /// asleep in (whose last contacts that pass still meets). Two such bodies are left alone;
 /// one touched by a body that moves is stirred, and runs the next step.
 fn frozen(body: &SoftBodyState, phase: SoftContactPhase) -> bool {
@@ -493,8 +492,8 @@ impl Contact {
         // Triangles facing into the collider a particle rests on are skipped in the passes
         // that ease a particle out at a bounded speed; the final pass, which moves it out
         // whole, would move it through the next triangle, maybe across the other body's thin
-        // part (a jelly dragon's pile 11 times its volume for a step): it leaves it.
-        let resting = self.phase != SoftContactPhase::Final;
+        // part: it leaves it.
+        let eases_out = self.phase != SoftContactPhase::Final;
         let mut contacts = 0;
         // The nearest triangle decides, as a signed distance would: a particle over the top
         // face near its edge is outside the body, whatever the side face's plane says.
@@ -514,7 +513,7 @@ impl Contact {
                     let listed = candidates.triangles_of(particle);
                     let near = |visit: &mut dyn FnMut(u32)| listed.iter().for_each(|&k| visit(k));
                     let blocked =
-                        |tri: [u32; 3]| resting && faces_into(p.resting_on[i], tri, corner);
+                        |tri: [u32; 3]| eases_out && faces_into(p.resting_on[i], tri, corner);
                     meet(i, nearest_triangle(xp, near, triangles, corner, blocked));
                 }
             }
@@ -533,7 +532,7 @@ impl Contact {
                         continue;
                     }
                     let skip = |tri: [u32; 3]| {
-                        (resting && faces_into(p.resting_on[i], tri, corner))
+                        (eases_out && faces_into(p.resting_on[i], tri, corner))
                             || rest.is_some_and(|rest| {
                                 if tri.contains(&(i as u32)) {
                                     return true;
@@ -549,7 +548,7 @@ impl Contact {
                     // into its collider: the substeps ease it out through another.
                     let into =
                         |c: &[usize; 3]| faces_into(p.resting_on[i], c.map(|j| j as u32), corner);
-                    meet(i, found.filter(|c| resting || !into(c)));
+                    meet(i, found.filter(|c| eases_out || !into(c)));
                 }
             }
         }
