@@ -449,7 +449,8 @@ fn main() {
     // high), dropped in two layers, over their first 3 s: meeting each other
     // (`jellies_16_pile`), and passing through each other (`jellies_16_pile_apart`, their soft
     // contacts off), which is what the contacts cost.
-    // Over 10 s too (`_10s`): the pile settles and falls asleep.
+    // Over 10 s too (`_10s`): the pile settles (whether it falls asleep shows in
+    // `awake_bodies`).
     for (name, contacts, steps) in [
         ("jellies_16_pile", true, 180),
         ("jellies_16_pile_apart", false, 180),

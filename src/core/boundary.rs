@@ -380,7 +380,8 @@ const FACING_COLLIDER: f32 = 0.5;
 /// outward normal is `resting_on` (zero: none): a particle on the ground can be past such a
 /// triangle only when it is wedged inside the triangle's body from the side (two bodies
 /// pressed together at their feet), and pushing it out through that triangle drives it into
-/// the ground, which throws it back every substep: it must leave through another triangle.
+/// the ground, which throws it back every substep: it must leave through another triangle
+/// (in the passes that ease it out; the final pass leaves it, `soft_contacts.rs`).
 pub(crate) fn faces_into(resting_on: Vec3, tri: [u32; 3], corner: impl Fn(usize) -> Vec3) -> bool {
     if resting_on == Vec3::ZERO {
         return false;

@@ -401,10 +401,10 @@ mod tests {
     /// Sixteen jelly cubes of 0.3 m dropped in two layers into a 1 m square box: from the
     /// second second on no body's volume is off by 1 %, the bottom layer carrying the top one
     /// included (at the substeps their motion asks for, the bottom layer lost over 1 %), and
-    /// after 8 s the pile is asleep (it falls asleep after 4 to 6 s: a pile's settling is
-    /// chaotic, any change to the contacts moves it). It never slept while a body's foot
-    /// wedged under its neighbour was pushed into the ground every substep, and a sleeping
-    /// body that its neighbours' substeps pushed lost 1 % of its volume in the step it woke.
+    /// after 8 s the pile is asleep (with room to spare: when a pile settles moves with any
+    /// change to its contacts). It never slept while a body's foot wedged under its neighbour
+    /// was pushed into the ground every substep, and a sleeping body that its neighbours'
+    /// substeps pushed lost volume in the step it woke.
     #[test]
     fn a_pile_of_jellies_keeps_every_body_volume_and_falls_asleep() {
         let mut colliders = vec![ColliderInstance::new(
