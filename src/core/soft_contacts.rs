@@ -16,7 +16,9 @@
 //!   particle stays within `mu` times its push of it: the position-based friction the ground's
 //!   contacts use, `contacts.rs`), sliding friction beyond;
 //! - after integration, on the positions the step ended at, moving penetrating particles
-//!   apart and stopping their approach, so that no particle ends a step inside another body.
+//!   apart and stopping their approach, so that no particle ends a step inside another body;
+//!   but one deeper in another body than the depenetration speed reaches in a step (bodies
+//!   placed overlapping), which the substeps' passes ease out.
 //!
 //! The volume impulses of a substep see these contacts as they see the ground's: a push into
 //! the other body is taken out of the impulse before its cubic is solved
@@ -52,8 +54,9 @@ use super::soft_records::{SoftAnchor, SoftSupport};
 pub(crate) enum SoftContactPhase {
     /// Before the contact stage of a step of `h`: on `x + h v`, changing velocities.
     Predicted(f32),
-    /// After integration: on `x`, moving particles apart and stopping their approach.
-    Final,
+    /// After integration of a step of `h`: on `x`, moving particles apart and stopping their
+    /// approach.
+    Final(f32),
     /// Inside a substep of the given length, on the positions the shape solve predicted
     /// (before they become velocities): moving particles apart, with friction on their
     /// relative motion since the substep's start, as XPBD meets contacts.
@@ -65,7 +68,7 @@ impl SoftContactPhase {
     fn ahead(self) -> f32 {
         match self {
             SoftContactPhase::Predicted(h) => h,
-            SoftContactPhase::Final | SoftContactPhase::Substep(_) => 0.0,
+            SoftContactPhase::Final(_) | SoftContactPhase::Substep(_) => 0.0,
         }
     }
 }
@@ -198,7 +201,7 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
 /// reads the step's candidates). The pass then resolves the overlapping pairs and each body
 /// with itself.
 fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) {
-    if phase != SoftContactPhase::Final {
+    if !matches!(phase, SoftContactPhase::Final(_)) {
         body.scratch.soft_supports.clear();
     }
     if let SoftContactPhase::Substep(_) = phase {
@@ -260,6 +263,10 @@ fn resolve_pair(
         return 0;
     }
     let thickness = sa.thickness.max(sb.thickness);
+    let final_reach = match phase {
+        SoftContactPhase::Final(h) => MAX_DEPENETRATION_SPEED * h,
+        _ => f32::INFINITY,
+    };
     let mu = combined_friction(a.material.friction, b.material.friction);
     let (frozen_a, frozen_b) = (frozen(a, phase), frozen(b, phase));
     let pa = Arrays::new(
@@ -289,6 +296,7 @@ fn resolve_pair(
         phase,
         thickness,
         friction: mu,
+        final_reach,
         partner: slots[1],
         supports: std::mem::take(&mut a.scratch.soft_supports).into(),
     };
@@ -296,6 +304,7 @@ fn resolve_pair(
         phase,
         thickness,
         friction: mu,
+        final_reach,
         partner: slots[0],
         supports: std::mem::take(&mut b.scratch.soft_supports).into(),
     };
@@ -352,7 +361,7 @@ fn resolve_pair(
 fn frozen(body: &SoftBodyState, phase: SoftContactPhase) -> bool {
     match phase {
         SoftContactPhase::Substep(_) => body.scratch.substep_plan.is_none(),
-        SoftContactPhase::Final => body.is_sleeping() && !body.sleep.fell_asleep_now,
+        SoftContactPhase::Final(_) => body.is_sleeping() && !body.sleep.fell_asleep_now,
         SoftContactPhase::Predicted(_) => false,
     }
 }
@@ -402,6 +411,7 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
         phase,
         thickness: settings.thickness,
         friction: body.material.friction,
+        final_reach: f32::INFINITY,
         partner: slot,
         supports: std::mem::take(&mut body.scratch.soft_supports).into(),
     };
@@ -470,6 +480,13 @@ struct Contact {
     phase: SoftContactPhase,
     thickness: f32,
     friction: f32,
+    /// How deep a particle the final pass moves out whole. Between two bodies, as far as the
+    /// depenetration speed reaches in the step: one deeper was inside before the step ended
+    /// (bodies placed overlapping, a particle a pile squeezed in), and the substeps ease it
+    /// out; moved out whole here, it would jump through the other body's thin parts and turn
+    /// tets inside out, and a resting pile would flicker. Any depth in a body's own contacts
+    /// (a body is never placed in itself; what its substeps missed of a fold is met here).
+    final_reach: f32,
     /// The slot of the triangles' body, and the supports found (substep phase).
     partner: u32,
     supports: std::cell::RefCell<Vec<SoftSupport>>,
@@ -493,7 +510,7 @@ impl Contact {
         // that ease a particle out at a bounded speed; the final pass, which moves it out
         // whole, would move it through the next triangle, maybe across the other body's thin
         // part: it leaves it.
-        let eases_out = self.phase != SoftContactPhase::Final;
+        let eases_out = !matches!(self.phase, SoftContactPhase::Final(_));
         let mut contacts = 0;
         // The nearest triangle decides, as a signed distance would: a particle over the top
         // face near its edge is outside the body, whatever the side face's plane says.
@@ -573,7 +590,8 @@ impl Contact {
         let now = corners.map(|j| t.x.get(j));
         let end = corners.map(|j| t.x.get(j) + ahead * t.v.get(j));
         let was_outside = outside_of(x, now, thickness);
-        let (d, n, q) = surface_distance(xp, end, self.phase == SoftContactPhase::Final)?;
+        let (d, n, q) =
+            surface_distance(xp, end, matches!(self.phase, SoftContactPhase::Final(_)))?;
         if d >= thickness || (d < -reach && !was_outside) {
             return None;
         }
@@ -599,6 +617,9 @@ impl Contact {
             let existing = surface_distance(p.start[i].vec3(), start, false)
                 .map_or(0.0, |(d0, ..)| -d0 - thickness);
             depth = bounded_correction(depth, existing, hs);
+        }
+        if matches!(self.phase, SoftContactPhase::Final(_)) && depth > self.final_reach {
+            return None;
         }
         let touch = Touch {
             i,
@@ -739,7 +760,7 @@ impl Contact {
                 lambda
             }
             SoftContactPhase::Substep(_) => unreachable!("handled above"),
-            SoftContactPhase::Final => {
+            SoftContactPhase::Final(_) => {
                 let shift = depth / w;
                 p.x.set(i, p.x.get(i) + n * (shift * w_p));
                 for k in 0..3 {
