@@ -71,6 +71,11 @@ impl SoftContactPhase {
             SoftContactPhase::Final(_) | SoftContactPhase::Substep(_) => 0.0,
         }
     }
+
+    /// Whether this is the pass that ends a step.
+    fn is_final(self) -> bool {
+        matches!(self, SoftContactPhase::Final(_))
+    }
 }
 
 /// Records the particles the last soft-contact pass touched for the volume passes, which
@@ -201,7 +206,7 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
 /// reads the step's candidates). The pass then resolves the overlapping pairs and each body
 /// with itself.
 fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) {
-    if !matches!(phase, SoftContactPhase::Final(_)) {
+    if !phase.is_final() {
         body.scratch.soft_supports.clear();
     }
     if let SoftContactPhase::Substep(_) = phase {
@@ -510,7 +515,7 @@ impl Contact {
         // that ease a particle out at a bounded speed; the final pass, which moves it out
         // whole, would move it through the next triangle, maybe across the other body's thin
         // part: it leaves it.
-        let eases_out = !matches!(self.phase, SoftContactPhase::Final(_));
+        let eases_out = !self.phase.is_final();
         let mut contacts = 0;
         // The nearest triangle decides, as a signed distance would: a particle over the top
         // face near its edge is outside the body, whatever the side face's plane says.
@@ -590,8 +595,7 @@ impl Contact {
         let now = corners.map(|j| t.x.get(j));
         let end = corners.map(|j| t.x.get(j) + ahead * t.v.get(j));
         let was_outside = outside_of(x, now, thickness);
-        let (d, n, q) =
-            surface_distance(xp, end, matches!(self.phase, SoftContactPhase::Final(_)))?;
+        let (d, n, q) = surface_distance(xp, end, self.phase.is_final())?;
         if d >= thickness || (d < -reach && !was_outside) {
             return None;
         }
@@ -618,7 +622,7 @@ impl Contact {
                 .map_or(0.0, |(d0, ..)| -d0 - thickness);
             depth = bounded_correction(depth, existing, hs);
         }
-        if matches!(self.phase, SoftContactPhase::Final(_)) && depth > self.final_reach {
+        if self.phase.is_final() && depth > self.final_reach {
             return None;
         }
         let touch = Touch {
