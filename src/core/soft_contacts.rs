@@ -17,8 +17,8 @@
 //!   contacts use, `contacts.rs`), sliding friction beyond;
 //! - after integration, on the positions the step ended at, moving penetrating particles
 //!   apart and stopping their approach, so that no particle ends a step inside another body;
-//!   but one deeper in another body than the depenetration speed reaches in a step (bodies
-//!   placed overlapping), which the substeps' passes ease out.
+//!   but one deeper in another body than a fast impact leaves (bodies placed overlapping),
+//!   which the substeps' passes ease out.
 //!
 //! The volume impulses of a substep see these contacts as they see the ground's: a push into
 //! the other body is taken out of the impulse before its cubic is solved
@@ -54,9 +54,8 @@ use super::soft_records::{SoftAnchor, SoftSupport};
 pub(crate) enum SoftContactPhase {
     /// Before the contact stage of a step of `h`: on `x + h v`, changing velocities.
     Predicted(f32),
-    /// After integration of a step of `h`: on `x`, moving particles apart and stopping their
-    /// approach.
-    Final(f32),
+    /// After integration: on `x`, moving particles apart and stopping their approach.
+    Final,
     /// Inside a substep of the given length, on the positions the shape solve predicted
     /// (before they become velocities): moving particles apart, with friction on their
     /// relative motion since the substep's start, as XPBD meets contacts.
@@ -68,13 +67,13 @@ impl SoftContactPhase {
     fn ahead(self) -> f32 {
         match self {
             SoftContactPhase::Predicted(h) => h,
-            SoftContactPhase::Final(_) | SoftContactPhase::Substep(_) => 0.0,
+            SoftContactPhase::Final | SoftContactPhase::Substep(_) => 0.0,
         }
     }
 
     /// Whether this is the pass that ends a step.
     fn is_final(self) -> bool {
-        matches!(self, SoftContactPhase::Final(_))
+        self == SoftContactPhase::Final
     }
 }
 
@@ -268,10 +267,6 @@ fn resolve_pair(
         return 0;
     }
     let thickness = sa.thickness.max(sb.thickness);
-    let final_reach = match phase {
-        SoftContactPhase::Final(h) => MAX_DEPENETRATION_SPEED * h,
-        _ => f32::INFINITY,
-    };
     let mu = combined_friction(a.material.friction, b.material.friction);
     let (frozen_a, frozen_b) = (frozen(a, phase), frozen(b, phase));
     let pa = Arrays::new(
@@ -301,7 +296,7 @@ fn resolve_pair(
         phase,
         thickness,
         friction: mu,
-        final_reach,
+        final_reach: FINAL_PASS_DEPTH,
         partner: slots[1],
         supports: std::mem::take(&mut a.scratch.soft_supports).into(),
     };
@@ -309,7 +304,7 @@ fn resolve_pair(
         phase,
         thickness,
         friction: mu,
-        final_reach,
+        final_reach: FINAL_PASS_DEPTH,
         partner: slots[0],
         supports: std::mem::take(&mut b.scratch.soft_supports).into(),
     };
@@ -366,7 +361,7 @@ fn resolve_pair(
 fn frozen(body: &SoftBodyState, phase: SoftContactPhase) -> bool {
     match phase {
         SoftContactPhase::Substep(_) => body.scratch.substep_plan.is_none(),
-        SoftContactPhase::Final(_) => body.is_sleeping() && !body.sleep.fell_asleep_now,
+        SoftContactPhase::Final => body.is_sleeping() && !body.sleep.fell_asleep_now,
         SoftContactPhase::Predicted(_) => false,
     }
 }
@@ -469,6 +464,14 @@ struct Touch {
     w_t: f32,
 }
 
+/// How deep in another body the pass that ends a step still moves a particle out whole: what
+/// a fast impact leaves behind a step's last substep (10 m/s over XPBD's substep of 1/600 s),
+/// at any step rate. A particle deeper was inside before the step ended (bodies placed
+/// overlapping, a particle a pile squeezed in), and the substeps ease it out; moved out whole,
+/// it would jump through the other body's thin parts and turn tets inside out, and a resting
+/// pile would flicker.
+const FINAL_PASS_DEPTH: f32 = 10.0 / 600.0;
+
 /// The part of a predicted penetration `depth` to remove within a step of `h`: all that the
 /// motion adds, and the penetration `existing` before it at most at
 /// [`MAX_DEPENETRATION_SPEED`], so that a particle already deep in a body is eased out rather
@@ -485,12 +488,9 @@ struct Contact {
     phase: SoftContactPhase,
     thickness: f32,
     friction: f32,
-    /// How deep a particle the final pass moves out whole. Between two bodies, as far as the
-    /// depenetration speed reaches in the step: one deeper was inside before the step ended
-    /// (bodies placed overlapping, a particle a pile squeezed in), and the substeps ease it
-    /// out; moved out whole here, it would jump through the other body's thin parts and turn
-    /// tets inside out, and a resting pile would flicker. Any depth in a body's own contacts
-    /// (a body is never placed in itself; what its substeps missed of a fold is met here).
+    /// How deep a particle the final pass moves out whole: [`FINAL_PASS_DEPTH`] between two
+    /// bodies, any depth in a body's own contacts (a body is never placed in itself; what its
+    /// substeps missed of a fold is met here).
     final_reach: f32,
     /// The slot of the triangles' body, and the supports found (substep phase).
     partner: u32,
@@ -764,7 +764,7 @@ impl Contact {
                 lambda
             }
             SoftContactPhase::Substep(_) => unreachable!("handled above"),
-            SoftContactPhase::Final(_) => {
+            SoftContactPhase::Final => {
                 let shift = depth / w;
                 p.x.set(i, p.x.get(i) + n * (shift * w_p));
                 for k in 0..3 {

@@ -204,17 +204,16 @@ pub(crate) fn substeps_together(
 }
 
 /// The soft-contact pass that ends a step of bodies stepped together (the last part of
-/// [`Stage::Finish`](super::Stage::Finish)) of `h`: on the positions the step ended at, moving
+/// [`Stage::Finish`](super::Stage::Finish)): on the positions the step ended at, moving
 /// penetrating particles apart and stopping their approach, so that no particle ends a step
 /// inside another body but one already deep in it, which the substeps ease out. Returns the
 /// contacts. `rounds` is the passes' scratch, kept by the caller.
 pub(crate) fn final_contacts_together(
     bodies: &mut [LockstepBody],
-    h: f32,
     parallel: &dyn Parallel,
     rounds: &mut PairRounds,
 ) -> u32 {
-    counted_pass(bodies, SoftContactPhase::Final(h), rounds, parallel)
+    counted_pass(bodies, SoftContactPhase::Final, rounds, parallel)
 }
 
 /// A whole step of several bodies that meet each other, in the plugin's order
@@ -242,7 +241,7 @@ pub fn step_bodies(
         body.state.apply_plasticity(h);
         body.state.finish_step(h, &[], colliders);
     }
-    contacts += final_contacts_together(&mut bodies, h, parallel, rounds);
+    contacts += final_contacts_together(&mut bodies, parallel, rounds);
     contacts
 }
 

@@ -177,11 +177,10 @@ pub(super) fn substeps_of_groups(
     }
 }
 
-/// The final soft-contact pass of every group, at the finish of a step of `h`.
+/// The final soft-contact pass of every group, at the step's finish.
 pub(super) fn final_pass_of_groups(
     bodies: &mut Bodies,
     groups: &mut SoftContactGroups,
-    h: f32,
     compute: &ComputePool,
 ) {
     let (groups, rounds) = groups.groups();
@@ -200,7 +199,7 @@ pub(super) fn final_pass_of_groups(
                 LockstepBody::new(&mut body.state, &mut body.spheres)
             })
             .collect();
-        final_contacts_together(&mut lockstep, h, compute, rounds);
+        final_contacts_together(&mut lockstep, compute, rounds);
         let counts: Vec<u32> = lockstep.iter().map(|b| b.contacts).collect();
         drop(lockstep);
         for ((_, stats), contacts) in members.iter_mut().zip(counts) {

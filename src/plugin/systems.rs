@@ -389,7 +389,7 @@ pub(super) fn finish(
             stats.steps += 1;
         },
     );
-    final_pass_of_groups(&mut bodies, &mut groups, h, &compute);
+    final_pass_of_groups(&mut bodies, &mut groups, &compute);
     spheres_after_bodies(Stage::Finish, h, &mut solver.states);
     p.clock.add_stage(start, Stage::Finish);
 }
