@@ -574,8 +574,8 @@ fn thrown_at_the_ground(method: VolumeMethod) {
 /// two at one spot): the dragon 40 % into the other, the bunny and the fTetWild creature 80 %.
 /// Nothing explodes: no body's volume is ever off by 3 %, none is caught running away, and they
 /// are pushed apart (their centres end further apart than they started). The pass that ends a
-/// step once moved such a particle out whole, through the other body's thin parts: the dragons
-/// turned inside out (-300 %) and ran away again after every reset.
+/// step must leave a particle that deep to the substeps: moved out whole, it jumps through the
+/// other body's thin parts.
 #[test]
 fn jellies_placed_deep_in_each_other_do_not_explode() {
     use bevy_soft_body::core::{ColliderInstance, SoftBodyState, step_bodies};
