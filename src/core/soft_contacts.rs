@@ -355,9 +355,10 @@ fn resolve_pair(
 
 /// Whether `body` stands still in a pass of `phase`, as a static collider would: in a substep's
 /// pass, a body that does not run this step's substeps (it was asleep when they were planned;
-/// moved by the others' contacts with no solve of its own, it would lose volume); in the pass that ends a step, a body asleep but for the one it fell
-/// asleep in (whose last contacts that pass still meets). Two such bodies are left alone;
-/// one touched by a body that moves is stirred, and runs the next step.
+/// moved by the others' contacts with no solve of its own, it would lose volume); in the pass
+/// that ends a step, a body asleep but for the one it fell asleep in (whose last contacts that
+/// pass still meets). Two such bodies are left alone; one touched by a body that moves is
+/// stirred, and runs the next step.
 fn frozen(body: &SoftBodyState, phase: SoftContactPhase) -> bool {
     match phase {
         SoftContactPhase::Substep(_) => body.scratch.substep_plan.is_none(),
