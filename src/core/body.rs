@@ -161,7 +161,7 @@ impl SoftBodyState {
             cracks: Vec::new(),
             since_tear: f32::INFINITY,
             origin: Vec::new(),
-            scratch: StepScratch::for_mesh(&mesh),
+            scratch: StepScratch::for_mesh(&mesh, material.method),
             mesh,
         };
         body.update_masses();

@@ -9,7 +9,9 @@
 //! [`XpbdSettings::clusters`](super::material::XpbdSettings::clusters) of them); each cluster's
 //! volume `C_c = sum of its tets' (V - V0)` is a constraint with gradient
 //! `G_c = sum of its tets' volume gradients` (non-zero only on the cluster's boundary, the sums
-//! cancelling inside), and the positions move by `dx = W G^T q` with `G W G^T q = -C`: a small
+//! cancelling inside; summed over the cluster's boundary faces, which is the same sum with the
+//! cancelling terms left out: a third of each face's area vector at each of its corners), and
+//! the positions move by `dx = W G^T q` with `G W G^T q = -C`: a small
 //! dense system (one row per cluster), solved by Cholesky. As with the paper's impulses
 //! (sections 4 and 5), each tet's gradients sum to zero, so `sum m dx = 0`: momentum is kept.
 //! A particle touching something does not move into it (the push along its contact normal is
@@ -32,7 +34,7 @@
 use glam::Vec3;
 
 use super::contacts::ContactState;
-use super::geometry::{signed_volume, volume_gradients};
+use super::geometry::signed_volume;
 use super::inversion::turn_inverted_tets_back;
 use super::tet_mesh::TetMesh;
 
@@ -44,13 +46,18 @@ pub(crate) struct ClusterVolumes {
     requested: u32,
     /// Per tet, its cluster.
     tet_cluster: Vec<u32>,
-    /// Per particle, where its slots start in `slot_cluster` (one slot per cluster among its
-    /// tets), and one past the last particle's.
+    /// Per particle, where its slots start in `slot_cluster` (one slot per cluster on whose
+    /// boundary it lies), and one past the last particle's.
     slot_starts: Vec<u32>,
+    /// The particles with slots, ascending: the only ones the correction moves (the gradients
+    /// of a particle inside a cluster are zero).
+    face_particles: Vec<u32>,
     /// Per slot, its cluster.
     slot_cluster: Vec<u32>,
-    /// Per tet corner, its particle's slot for the tet's cluster.
-    corner_slot: Vec<[u32; 4]>,
+    /// Each cluster's boundary faces (its tets' faces that no other tet of it shares, wound
+    /// outward), and per face corner its particle's slot for the face's cluster.
+    faces: Vec<[u32; 3]>,
+    face_slots: Vec<[u32; 3]>,
     /// Per cluster, its rest volume.
     rest: Vec<f64>,
     /// Per slot, the cluster's volume gradient at the slot's particle.
@@ -85,14 +92,18 @@ impl ClusterVolumes {
             })
             .collect();
         let clusters = cells.len();
+        let faces = boundary_faces(mesh, &tet_cluster);
         let mut per_particle: Vec<Vec<u32>> = vec![Vec::new(); mesh.vertex_count()];
-        for (tet, &c) in mesh.tets().iter().zip(&tet_cluster) {
-            for &i in tet {
+        for &(c, face) in &faces {
+            for i in face {
                 if !per_particle[i as usize].contains(&c) {
                     per_particle[i as usize].push(c);
                 }
             }
         }
+        let face_particles = (0..per_particle.len() as u32)
+            .filter(|&i| !per_particle[i as usize].is_empty())
+            .collect();
         let mut slot_starts = Vec::with_capacity(per_particle.len() + 1);
         let mut slot_cluster = Vec::new();
         for list in &per_particle {
@@ -100,18 +111,17 @@ impl ClusterVolumes {
             slot_cluster.extend_from_slice(list);
         }
         slot_starts.push(slot_cluster.len() as u32);
-        let corner_slot = mesh
-            .tets()
+        let face_slots = faces
             .iter()
-            .zip(&tet_cluster)
-            .map(|(tet, &c)| {
-                tet.map(|i| {
+            .map(|&(c, face)| {
+                face.map(|i| {
                     let i = i as usize;
                     let k = per_particle[i].iter().position(|&d| d == c).unwrap_or(0);
                     slot_starts[i] + k as u32
                 })
             })
             .collect();
+        let faces = faces.into_iter().map(|(_, face)| face).collect();
         let mut rest = vec![0.0; clusters];
         for (&c, &v0) in tet_cluster.iter().zip(mesh.rest_volumes()) {
             rest[c as usize] += v0 as f64;
@@ -121,8 +131,10 @@ impl ClusterVolumes {
             tet_cluster,
             gradients: vec![Vec3::ZERO; slot_cluster.len()],
             slot_starts,
+            face_particles,
             slot_cluster,
-            corner_slot,
+            faces,
+            face_slots,
             rest,
             volume: vec![0.0; clusters],
             matrix: vec![0.0; clusters * clusters],
@@ -144,12 +156,20 @@ impl ClusterVolumes {
         inv_masses: &[f32],
         contacts: &ContactState,
     ) {
+        let inside_out = self.measure(mesh, positions);
         for round in 0..2 {
-            let turned = turn_inverted_tets_back(mesh, positions, velocities, inv_masses);
+            // The first round's turn only where `measure` met a tet inside out.
+            let turned = if round == 0 && inside_out == 0 {
+                0
+            } else {
+                turn_inverted_tets_back(mesh, positions, velocities, inv_masses)
+            };
             if round > 0 && turned == 0 {
                 return;
             }
-            self.measure(mesh, positions);
+            if turned > 0 {
+                self.measure(mesh, positions);
+            }
             self.assemble(inv_masses, contacts);
             if !solve_cholesky(&mut self.matrix, &mut self.rhs, self.rest.len()) {
                 return;
@@ -161,7 +181,8 @@ impl ClusterVolumes {
 
     /// Moves each particle by `w G^T q` (`q` the solution in `rhs`), not into what it touches.
     fn push(&self, positions: &mut [Vec3], inv_masses: &[f32], contacts: &ContactState) {
-        for (i, x) in positions.iter_mut().enumerate() {
+        for &i in &self.face_particles {
+            let (i, x) = (i as usize, &mut positions[i as usize]);
             let w = inv_masses[i];
             if w == 0.0 {
                 continue;
@@ -182,22 +203,25 @@ impl ClusterVolumes {
         self.slot_starts[i] as usize..self.slot_starts[i + 1] as usize
     }
 
-    /// Each cluster's volume and its gradient at each of its particles.
-    fn measure(&mut self, mesh: &TetMesh, positions: &[Vec3]) {
-        self.gradients.fill(Vec3::ZERO);
+    /// Each cluster's volume (the sum of its tets') and its gradient at each of its particles
+    /// (over its boundary faces). Returns how many tets are inside out.
+    fn measure(&mut self, mesh: &TetMesh, positions: &[Vec3]) -> u32 {
         self.volume.fill(0.0);
-        for ((tet, &c), slots) in mesh
-            .tets()
-            .iter()
-            .zip(&self.tet_cluster)
-            .zip(&self.corner_slot)
-        {
-            let x = tet.map(|i| positions[i as usize]);
-            self.volume[c as usize] += signed_volume(&x) as f64;
-            for (g, &s) in volume_gradients(&x).into_iter().zip(slots) {
-                self.gradients[s as usize] += g;
+        let mut inside_out = 0;
+        for (tet, &c) in mesh.tets().iter().zip(&self.tet_cluster) {
+            let volume = signed_volume(&tet.map(|i| positions[i as usize]));
+            self.volume[c as usize] += volume as f64;
+            inside_out += (volume < 0.0) as u32;
+        }
+        self.gradients.fill(Vec3::ZERO);
+        for (face, slots) in self.faces.iter().zip(&self.face_slots) {
+            let [a, b, c] = face.map(|i| positions[i as usize]);
+            let third = (b - a).cross(c - a) * (1.0 / 6.0);
+            for &s in slots {
+                self.gradients[s as usize] += third;
             }
         }
+        inside_out
     }
 
     /// `G W G^T` and `-C`. A cluster no free particle can change (all of it kinematic) gets
@@ -205,7 +229,8 @@ impl ClusterVolumes {
     fn assemble(&mut self, inv_masses: &[f32], contacts: &ContactState) {
         let k = self.rest.len();
         self.matrix.fill(0.0);
-        for (i, &w) in inv_masses.iter().enumerate() {
+        for &i in &self.face_particles {
+            let (i, w) = (i as usize, inv_masses[i as usize]);
             if w == 0.0 {
                 continue;
             }
@@ -231,6 +256,33 @@ impl ClusterVolumes {
             }
         }
     }
+}
+
+/// The boundary faces of every cluster (`tet_cluster`: per tet of `mesh`, its cluster), each
+/// with its cluster, wound outward (the face's normal `(b - a) x (c - a)` points out of the
+/// tet whose face it is: every tet's rest volume is positive, `TetMesh::new` turns them so), in
+/// the order their tets come.
+fn boundary_faces(mesh: &TetMesh, tet_cluster: &[u32]) -> Vec<(u32, [u32; 3])> {
+    // The outward faces of a tet `[0, 1, 2, 3]` of positive `signed_volume`, opposite each corner.
+    const OUTWARD: [[usize; 3]; 4] = [[1, 3, 2], [0, 2, 3], [3, 1, 0], [2, 0, 1]];
+    let mut faces: Vec<Option<(u32, [u32; 3])>> = Vec::with_capacity(4 * mesh.tet_count());
+    let mut open = std::collections::HashMap::new();
+    for (tet, &c) in mesh.tets().iter().zip(tet_cluster) {
+        for corners in OUTWARD {
+            let face = corners.map(|k| tet[k]);
+            let mut key = face;
+            key.sort_unstable();
+            // A face two tets of the cluster share is inside it: both go.
+            match open.remove(&(c, key)) {
+                Some(k) => faces[k] = None,
+                None => {
+                    open.insert((c, key), faces.len());
+                    faces.push(Some((c, face)));
+                }
+            }
+        }
+    }
+    faces.into_iter().flatten().collect()
 }
 
 /// [`ClusterVolumes::correct`] with about `requested` clusters of `mesh`, made anew in
@@ -357,6 +409,59 @@ mod tests {
             momentum.x.abs() < 1e-5 && momentum.z.abs() < 1e-5,
             "{momentum}"
         );
+    }
+
+    /// The clusters' gradients summed over their boundary faces are the sums of their tets'
+    /// volume gradients, on a grid and on a mesh another tool made (its tets given either way
+    /// round), bent out of shape; and their volumes are their tets'.
+    #[test]
+    fn the_boundary_faces_give_the_tets_gradients() {
+        let grid = box_grid(UVec3::new(5, 4, 6), Vec3::splat(0.1), Vec3::ZERO).unwrap();
+        let bunny = crate::game_scenes::BundledMesh::Bunny.load().unwrap();
+        let turned = TetMesh::new(
+            bunny.positions().to_vec(),
+            bunny
+                .tets()
+                .iter()
+                .map(|&[a, b, c, d]| [b, a, c, d])
+                .collect(),
+        );
+        for mesh in [grid, bunny, turned.unwrap()] {
+            let mut clusters = ClusterVolumes::new(&mesh, 8);
+            let x: Vec<Vec3> = mesh
+                .positions()
+                .iter()
+                .map(|p| *p + 0.03 * Vec3::new((7.0 * p.y).sin(), (5.0 * p.z).cos(), p.x * p.y))
+                .collect();
+            let inside_out = crate::core::inversion::inverted_tets(&mesh, &x);
+            assert_eq!(clusters.measure(&mesh, &x) as usize, inside_out);
+            // Per particle and cluster, the sum of the tets' gradients.
+            let mut expected = std::collections::BTreeMap::new();
+            let mut volume = vec![0.0f64; clusters.rest.len()];
+            for (tet, &c) in mesh.tets().iter().zip(&clusters.tet_cluster) {
+                let corners = tet.map(|i| x[i as usize]);
+                volume[c as usize] += signed_volume(&corners) as f64;
+                let g = crate::core::geometry::volume_gradients(&corners);
+                for (&i, g) in tet.iter().zip(g) {
+                    *expected.entry((i as usize, c)).or_insert(Vec3::ZERO) += g;
+                }
+            }
+            let scale = expected.values().map(|g| g.length()).fold(0.0, f32::max);
+            // A particle without a slot for a cluster (inside it) has no gradient there.
+            for ((i, c), e) in expected {
+                let g = clusters
+                    .slots(i)
+                    .find(|&s| clusters.slot_cluster[s] == c)
+                    .map_or(Vec3::ZERO, |s| clusters.gradients[s]);
+                assert!(
+                    (g - e).length() < 1e-4 * scale,
+                    "{i} in {c}: {g} against {e}"
+                );
+            }
+            for (v, e) in clusters.volume.iter().zip(&volume) {
+                assert!((v - e).abs() <= 1e-9 * e.abs(), "{v} against {e}");
+            }
+        }
     }
 
     /// A tet turned inside out (a corner pushed through its opposite face) is turned back.

@@ -6,6 +6,7 @@ use super::chunks::ChunkFindings;
 use super::clusters::ClusterVolumes;
 use super::deviatoric::{ShapeBundle, shape_bundles};
 use super::lanes::Point4;
+use super::material::VolumeMethod;
 use super::parallel::BlockFlags;
 use super::soft_records::{SoftAnchor, SoftReaction, SoftSupport};
 use super::substep_plan::{SubstepClock, SubstepPlan};
@@ -63,14 +64,14 @@ pub(crate) struct StepScratch {
     pub(crate) soft_removed: Vec<Vec3>,
     /// The soft contacts of this body's particles since the count was last taken.
     pub(crate) soft_count: u32,
-    /// The clusters of XPBD's cluster volume correction (`clusters.rs`), made at the first
-    /// step that uses them.
+    /// The clusters of XPBD's cluster volume correction (`clusters.rs`): made with the body
+    /// for its material's method, or at the first step of another that uses them.
     pub(crate) clusters: ClusterVolumes,
 }
 
 impl StepScratch {
-    /// The working memory of a body of `mesh`.
-    pub(crate) fn for_mesh(mesh: &TetMesh) -> Self {
+    /// The working memory of a body of `mesh` whose volume is kept by `method`.
+    pub(crate) fn for_mesh(mesh: &TetMesh, method: VolumeMethod) -> Self {
         let n = mesh.vertex_count();
         StepScratch {
             per_particle: vec![Vec3::ZERO; n],
@@ -87,7 +88,10 @@ impl StepScratch {
             soft_pass: 1,
             soft_removed: vec![Vec3::ZERO; n],
             soft_count: 0,
-            clusters: ClusterVolumes::default(),
+            clusters: match method {
+                VolumeMethod::Xpbd(s) if s.clusters > 0 => ClusterVolumes::new(mesh, s.clusters),
+                _ => ClusterVolumes::default(),
+            },
             substep_velocities: vec![Vec3::ZERO; n],
             shape_moves: vec![Vec3::ZERO; n],
             volume_held_back: vec![Vec3::ZERO; n],
