@@ -236,6 +236,7 @@ impl SoftBodyState {
     /// map that is not a rigid motion is a deformation the body will undo.
     pub fn map_positions(&mut self, f: impl Fn(Vec3) -> Vec3) {
         self.sleep.wake();
+        self.scratch.volume_corrected = false;
         self.positions.iter_mut().for_each(|p| *p = f(*p));
         self.previous_positions.copy_from_slice(&self.positions);
         self.motion_tracked = false;
@@ -254,6 +255,7 @@ impl SoftBodyState {
         }
         let density_changed = material.density != self.material.density;
         let elasticity_changed = material.elasticity != self.material.elasticity;
+        self.scratch.volume_corrected &= material.method == self.material.method;
         self.material = material;
         if density_changed {
             self.update_masses();
@@ -488,6 +490,7 @@ impl SoftBodyState {
         }
         s.check(&self.mesh, self.springs.rest.len())?;
         self.set_material(s.material)?;
+        self.scratch.volume_corrected = false;
         self.positions.copy_from_slice(&s.positions);
         self.previous_positions
             .copy_from_slice(&s.previous_positions);

@@ -64,6 +64,10 @@ pub(crate) struct StepScratch {
     pub(crate) soft_removed: Vec<Vec3>,
     /// The soft contacts of this body's particles since the count was last taken.
     pub(crate) soft_count: u32,
+    /// Whether the positions are where the last step's cluster correction left them (nothing
+    /// outside a step moved them since): the body's volume is then its rest volume, and the
+    /// next step need not measure it for `volume_drifted`.
+    pub(crate) volume_corrected: bool,
     /// The clusters of XPBD's cluster volume correction (`clusters.rs`): made with the body
     /// for its material's method, or at the first step of another that uses them.
     pub(crate) clusters: ClusterVolumes,
@@ -88,6 +92,7 @@ impl StepScratch {
             soft_pass: 1,
             soft_removed: vec![Vec3::ZERO; n],
             soft_count: 0,
+            volume_corrected: false,
             clusters: match method {
                 VolumeMethod::Xpbd(s) if s.clusters > 0 => ClusterVolumes::new(mesh, s.clusters),
                 _ => ClusterVolumes::default(),

@@ -283,7 +283,11 @@ impl SoftBodyState {
         if tet_compliance.is_some() || volumes {
             refresh_shape_bundles(&mut self.scratch.shape_bundles, &self.inv_masses);
         }
-        self.scratch.volume_drifted = volumes && volume_drifted(&self.mesh, &self.positions);
+        // Under the cluster correction the volume drifts only when something outside the
+        // steps moved the particles.
+        self.scratch.volume_drifted = volumes
+            && !self.scratch.volume_corrected
+            && volume_drifted(&self.mesh, &self.positions);
         // The rigid bodies of another engine get their gravity per substep too, and are
         // followed along their path within the step.
         for body in &mut self.rigid.bodies {
@@ -456,6 +460,7 @@ impl SoftBodyState {
                 let clusters = &mut self.scratch.clusters;
                 let (mesh, contacts) = (&self.mesh, &self.contacts);
                 correct_cluster_volumes(clusters, s.clusters, mesh, (x, v, w), contacts);
+                self.scratch.volume_corrected = true;
             }
             VolumeMethod::Impulses(_) => {
                 turn_inverted_tets_back(&self.mesh, x, v, w);
