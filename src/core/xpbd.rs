@@ -150,9 +150,14 @@ pub(crate) fn project_volume_bundles(
 ) {
     let sixth = f32x4::splat(1.0 / 6.0);
     for b in bundles {
-        let [a, bb, c, d] = b
-            .corners
-            .map(|lanes| Vec3x4::from_vecs(lanes.map(|i| start[i].vec3() + moves[i])));
+        // Written out rather than as nested `map`s, which the compiler may leave as calls in
+        // this loop (a tenth of XPBD's step when it did).
+        let at = |i: usize| start[i].vec3() + moves[i];
+        let corner = |k: usize| {
+            let l = &b.corners[k];
+            Vec3x4::from_vecs([at(l[0]), at(l[1]), at(l[2]), at(l[3])])
+        };
+        let [a, bb, c, d] = [corner(0), corner(1), corner(2), corner(3)];
         let g_a = (bb - d).cross(c - d).scale(sixth);
         let g_b = (c - d).cross(a - d).scale(sixth);
         let g_c = (a - d).cross(bb - d).scale(sixth);
