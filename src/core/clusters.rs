@@ -38,11 +38,6 @@ use super::geometry::signed_volume;
 use super::inversion::turn_inverted_tets_back;
 use super::tet_mesh::TetMesh;
 
-/// How far off its rest volume (a share of it) every cluster may be for the correction to
-/// leave the step as it is: a body falling free or at rest loses less in a step, and is not
-/// moved for nothing (the paper's impulses keep a tolerance too).
-const TOLERANCE: f64 = 1e-4;
-
 /// A body's clusters and the working memory of their correction (sized once, with the body or
 /// when the number of clusters asked for changes).
 #[derive(Clone, Debug, Default)]
@@ -148,8 +143,7 @@ impl ClusterVolumes {
     }
 
     /// Moves `positions` so that every cluster has its rest volume (to first order), particles
-    /// of inverse mass `inv_masses`, those touching something (`contacts`) not pushed into it;
-    /// nothing if every cluster is within [`TOLERANCE`] of it and no tet is inside out.
+    /// of inverse mass `inv_masses`, those touching something (`contacts`) not pushed into it.
     /// Tets left inside out are turned back first; if the correction's push folds one again, it
     /// is turned back and the clusters corrected once more (a sliver's turn changes its
     /// cluster's volume), and what that second push folds is turned back last (a sliver's
@@ -163,10 +157,6 @@ impl ClusterVolumes {
         contacts: &ContactState,
     ) {
         let inside_out = self.measure(mesh, positions);
-        let off = |(v, v0): (&f64, &f64)| (v - v0).abs() > TOLERANCE * v0;
-        if inside_out == 0 && !self.volume.iter().zip(&self.rest).any(off) {
-            return;
-        }
         for round in 0..2 {
             // The first round's turn only where `measure` met a tet inside out.
             let turned = if round == 0 && inside_out == 0 {
