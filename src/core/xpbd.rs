@@ -151,7 +151,7 @@ pub(crate) fn project_volume_bundles(
     let sixth = f32x4::splat(1.0 / 6.0);
     for b in bundles {
         // Written out rather than as nested `map`s, which the compiler may leave as calls in
-        // this loop (a tenth of XPBD's step when it did).
+        // this loop (PERFORMANCE.md, "The cluster correction's cost").
         let at = |i: usize| start[i].vec3() + moves[i];
         let corner = |k: usize| {
             let l = &b.corners[k];
