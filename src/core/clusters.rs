@@ -35,7 +35,7 @@ use glam::Vec3;
 
 use super::contacts::ContactState;
 use super::geometry::signed_volume;
-use super::inversion::turn_inverted_tets_back;
+use super::inversion::{TurnScratch, turn_inverted_tets_back};
 use super::tet_mesh::TetMesh;
 
 /// A body's clusters and the working memory of their correction (sized once, with the body or
@@ -154,7 +154,7 @@ impl ClusterVolumes {
         positions: &mut [Vec3],
         velocities: &mut [Vec3],
         inv_masses: &[f32],
-        contacts: &ContactState,
+        (contacts, turns): (&ContactState, &mut TurnScratch),
     ) {
         let inside_out = self.measure(mesh, positions);
         for round in 0..2 {
@@ -162,7 +162,7 @@ impl ClusterVolumes {
             let turned = if round == 0 && inside_out == 0 {
                 0
             } else {
-                turn_inverted_tets_back(mesh, positions, velocities, inv_masses)
+                turn_inverted_tets_back(mesh, (positions, velocities, inv_masses), turns)
             };
             if round > 0 && turned == 0 {
                 return;
@@ -176,7 +176,7 @@ impl ClusterVolumes {
             }
             self.push(positions, inv_masses, contacts);
         }
-        turn_inverted_tets_back(mesh, positions, velocities, inv_masses);
+        turn_inverted_tets_back(mesh, (positions, velocities, inv_masses), turns);
     }
 
     /// Moves each particle by `w G^T q` (`q` the solution in `rhs`), not into what it touches.
@@ -293,7 +293,7 @@ pub(crate) fn correct_cluster_volumes(
     requested: u32,
     mesh: &TetMesh,
     (positions, velocities, inv_masses): (&mut [Vec3], &mut [Vec3], &[f32]),
-    contacts: &ContactState,
+    (contacts, turns): (&ContactState, &mut TurnScratch),
 ) {
     if clusters.requested != requested
         || clusters.tet_cluster.len() != mesh.tet_count()
@@ -301,7 +301,7 @@ pub(crate) fn correct_cluster_volumes(
     {
         *clusters = ClusterVolumes::new(mesh, requested);
     }
-    clusters.correct(mesh, positions, velocities, inv_masses, contacts);
+    clusters.correct(mesh, positions, velocities, inv_masses, (contacts, turns));
 }
 
 /// `a` at particle `i` without what would push it into what it touches (`contacts`): all of
@@ -383,8 +383,9 @@ mod tests {
             }
         }
         let mut v = vec![Vec3::ZERO; x.len()];
+        let turns = &mut TurnScratch::default();
         for _ in 0..3 {
-            clusters.correct(&mesh, &mut x, &mut v, &w, &contacts);
+            clusters.correct(&mesh, &mut x, &mut v, &w, (&contacts, turns));
         }
         clusters.measure(&mesh, &x);
         for (v, v0) in clusters.volume.iter().zip(&clusters.rest) {
@@ -478,7 +479,8 @@ mod tests {
         let mut v = vec![Vec3::ZERO; x.len()];
         let mut clusters = ClusterVolumes::new(&mesh, 8);
         let contacts = ContactState::new(x.len());
-        clusters.correct(&mesh, &mut x, &mut v, &w, &contacts);
+        let turns = &mut TurnScratch::default();
+        clusters.correct(&mesh, &mut x, &mut v, &w, (&contacts, turns));
         assert_eq!(inverted(&x), 0);
     }
 }

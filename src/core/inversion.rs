@@ -16,68 +16,121 @@ const UNFOLDED: f32 = 0.1;
 /// still inside out, or fold a neighbour that shares its corners.
 const SWEEPS: usize = 8;
 
+/// The tets a sweep of [`turn_inverted_tets_back`] looks at after its first: those around the
+/// corners the sweep before moved, the only ones it can have folded. Sized for a mesh at its
+/// first use, then reused (no step allocates).
+#[derive(Clone, Debug, Default)]
+pub(crate) struct TurnScratch {
+    /// Per tet, the sweep that last listed it.
+    listed: Vec<u32>,
+    sweep: u32,
+    /// The tets the next sweep looks at, ascending, and the tets the current one turned.
+    tets: Vec<u32>,
+    turned: Vec<u32>,
+}
+
+impl TurnScratch {
+    /// Lists the tets around the corners of those just turned, in index order (a sweep's own).
+    fn list_around_turned(&mut self, mesh: &TetMesh) {
+        if self.sweep == u32::MAX {
+            self.listed.fill(0);
+            self.sweep = 0;
+        }
+        self.sweep += 1;
+        self.tets.clear();
+        for &t in &self.turned {
+            for &i in &mesh.tets()[t as usize] {
+                for &u in mesh.one_ring(i as usize) {
+                    if self.listed[u as usize] != self.sweep {
+                        self.listed[u as usize] = self.sweep;
+                        self.tets.push(u);
+                    }
+                }
+            }
+        }
+        self.tets.sort_unstable();
+        self.turned.clear();
+    }
+}
+
 /// Turns each tet left inside out back to a tenth of its rest volume ([`UNFOLDED`]), one at a
-/// time (a projection of that tet alone), sweeping the tets again while a sweep turned any (at
-/// most [`SWEEPS`]), and returns how many turns it made. Its particles are moved as the tet
+/// time (a projection of that tet alone), sweeping again while a sweep turned any (at most
+/// [`SWEEPS`]; after the first, over the tets around the corners the last sweep moved), and
+/// returns how many turns it made. Its particles are moved as the tet
 /// needs, even into what they touch (the next substep's contacts push them out): a tet lying on
 /// the ground must be able to lift its corners off it (PERFORMANCE.md, "Cluster volume
 /// correction"). What of their velocities would fold it again is taken out, as a contact takes
 /// out a velocity into what it touches, so that the next substeps do not fold it again.
 pub(crate) fn turn_inverted_tets_back(
     mesh: &TetMesh,
-    positions: &mut [Vec3],
-    velocities: &mut [Vec3],
-    inv_masses: &[f32],
+    (positions, velocities, inv_masses): (&mut [Vec3], &mut [Vec3], &[f32]),
+    scratch: &mut TurnScratch,
 ) -> u32 {
-    let mut turned = 0;
-    for _ in 0..SWEEPS {
-        let sweep = turn_sweep(mesh, positions, velocities, inv_masses);
-        turned += sweep;
-        if sweep == 0 {
+    if scratch.listed.len() != mesh.tet_count() {
+        *scratch = TurnScratch {
+            listed: vec![0; mesh.tet_count()],
+            sweep: 0,
+            tets: Vec::with_capacity(mesh.tet_count()),
+            turned: Vec::with_capacity(mesh.tet_count()),
+        };
+    }
+    scratch.turned.clear();
+    for (t, tet) in mesh.tets().iter().enumerate() {
+        let volume = signed_volume(&tet.map(|i| positions[i as usize]));
+        if volume < 0.0 && turn_tet(mesh, t, volume, (positions, velocities, inv_masses)) {
+            scratch.turned.push(t as u32);
+        }
+    }
+    let mut turned = scratch.turned.len() as u32;
+    for _ in 1..SWEEPS {
+        if scratch.turned.is_empty() {
             break;
         }
+        scratch.list_around_turned(mesh);
+        for k in 0..scratch.tets.len() {
+            let t = scratch.tets[k] as usize;
+            let volume = signed_volume(&mesh.tets()[t].map(|i| positions[i as usize]));
+            if volume < 0.0 && turn_tet(mesh, t, volume, (positions, velocities, inv_masses)) {
+                scratch.turned.push(t as u32);
+            }
+        }
+        turned += scratch.turned.len() as u32;
     }
     turned
 }
 
-/// One sweep of [`turn_inverted_tets_back`] over the tets.
-fn turn_sweep(
+/// Turns tet `t`, inside out at `volume`, back (see [`turn_inverted_tets_back`]); whether it
+/// could (false if no corner can move).
+fn turn_tet(
     mesh: &TetMesh,
-    positions: &mut [Vec3],
-    velocities: &mut [Vec3],
-    inv_masses: &[f32],
-) -> u32 {
-    let mut turned = 0;
-    for (tet, &v0) in mesh.tets().iter().zip(mesh.rest_volumes()) {
-        let x = tet.map(|i| positions[i as usize]);
-        let volume = signed_volume(&x);
-        if volume >= 0.0 {
-            continue;
-        }
-        let w = tet.map(|i| inv_masses[i as usize]);
-        let Some(step) = tet_projection(&x, &w, UNFOLDED * v0 - volume) else {
-            continue;
-        };
-        for (k, g) in step.into_iter().enumerate() {
-            positions[tet[k] as usize] += g;
-        }
-        let x = tet.map(|i| positions[i as usize]);
-        let v = tet.map(|i| velocities[i as usize]);
-        let rate: f32 = volume_gradients(&x)
-            .iter()
-            .zip(&v)
-            .map(|(g, v)| g.dot(*v))
-            .sum();
-        if rate < 0.0
-            && let Some(step) = tet_projection(&x, &w, -rate)
-        {
-            for (k, g) in step.into_iter().enumerate() {
-                velocities[tet[k] as usize] += g;
-            }
-        }
-        turned += 1;
+    t: usize,
+    volume: f32,
+    (positions, velocities, inv_masses): (&mut [Vec3], &mut [Vec3], &[f32]),
+) -> bool {
+    let tet = mesh.tets()[t];
+    let x = tet.map(|i| positions[i as usize]);
+    let w = tet.map(|i| inv_masses[i as usize]);
+    let Some(step) = tet_projection(&x, &w, UNFOLDED * mesh.rest_volumes()[t] - volume) else {
+        return false;
+    };
+    for (k, g) in step.into_iter().enumerate() {
+        positions[tet[k] as usize] += g;
     }
-    turned
+    let x = tet.map(|i| positions[i as usize]);
+    let v = tet.map(|i| velocities[i as usize]);
+    let rate: f32 = volume_gradients(&x)
+        .iter()
+        .zip(&v)
+        .map(|(g, v)| g.dot(*v))
+        .sum();
+    if rate < 0.0
+        && let Some(step) = tet_projection(&x, &w, -rate)
+    {
+        for (k, g) in step.into_iter().enumerate() {
+            velocities[tet[k] as usize] += g;
+        }
+    }
+    true
 }
 
 /// The change of a tet's corners `x` (inverse masses `w`) along its volume gradients that
@@ -131,7 +184,11 @@ mod tests {
         let inverted = |x: &[Vec3]| inverted_tets(&mesh, x);
         assert!(inverted(&x) > 0);
         let w = vec![1.0; x.len()];
-        assert_eq!(turn_inverted_tets_back(&mesh, &mut x, &mut v, &w), 1);
+        let scratch = &mut TurnScratch::default();
+        assert_eq!(
+            turn_inverted_tets_back(&mesh, (&mut x, &mut v, &w), scratch),
+            1
+        );
         assert_eq!(inverted(&x), 0);
         let after = folding(&x, &v);
         assert!(

@@ -5,6 +5,7 @@ use glam::Vec3;
 use super::chunks::ChunkFindings;
 use super::clusters::ClusterVolumes;
 use super::deviatoric::{ShapeBundle, shape_bundles};
+use super::inversion::TurnScratch;
 use super::lanes::Point4;
 use super::material::VolumeMethod;
 use super::parallel::BlockFlags;
@@ -68,6 +69,8 @@ pub(crate) struct StepScratch {
     /// outside a step moved them since): the body's volume is then its rest volume, and the
     /// next step need not measure it for `volume_drifted`.
     pub(crate) volume_corrected: bool,
+    /// The tets the sweeps that turn tets back look at after their first (`inversion.rs`).
+    pub(crate) turns: TurnScratch,
     /// The clusters of XPBD's cluster volume correction (`clusters.rs`): made with the body
     /// for its material's method, or at the first step of another that uses them.
     pub(crate) clusters: ClusterVolumes,
@@ -93,6 +96,7 @@ impl StepScratch {
             soft_removed: vec![Vec3::ZERO; n],
             soft_count: 0,
             volume_corrected: false,
+            turns: TurnScratch::default(),
             clusters: match method {
                 VolumeMethod::Xpbd(s) if s.clusters > 0 => ClusterVolumes::new(mesh, s.clusters),
                 _ => ClusterVolumes::default(),

@@ -455,15 +455,16 @@ impl SoftBodyState {
     /// back (`inversion.rs`).
     fn last_substep_corrections(&mut self) {
         let (x, v, w) = (&mut self.positions, &mut self.velocities, &self.inv_masses);
+        let turns = &mut self.scratch.turns;
         match self.material.method {
             VolumeMethod::Xpbd(s) if s.clusters > 0 => {
                 let clusters = &mut self.scratch.clusters;
                 let (mesh, contacts) = (&self.mesh, &self.contacts);
-                correct_cluster_volumes(clusters, s.clusters, mesh, (x, v, w), contacts);
+                correct_cluster_volumes(clusters, s.clusters, mesh, (x, v, w), (contacts, turns));
                 self.scratch.volume_corrected = true;
             }
             VolumeMethod::Impulses(_) => {
-                turn_inverted_tets_back(&self.mesh, x, v, w);
+                turn_inverted_tets_back(&self.mesh, (x, v, w), turns);
             }
             _ => {}
         }
