@@ -13,8 +13,9 @@ use super::tet_mesh::TetMesh;
 const UNFOLDED: f32 = 0.1;
 
 /// The most sweeps [`turn_inverted_tets_back`] makes: a first-order turn can leave a sliver
-/// still inside out, or fold a neighbour that shares its corners.
-const SWEEPS: usize = 8;
+/// still inside out, or fold a neighbour that shares its corners (one a later sweep meets, as
+/// the sweeps after the first look only around what the last one moved).
+const SWEEPS: usize = 32;
 
 /// The tets a sweep of [`turn_inverted_tets_back`] looks at after its first: those around the
 /// corners the sweep before moved, the only ones it can have folded. Sized for a mesh at its
