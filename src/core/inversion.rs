@@ -57,11 +57,11 @@ impl TurnScratch {
 /// Turns each tet left inside out back to a tenth of its rest volume ([`UNFOLDED`]), one at a
 /// time (a projection of that tet alone), sweeping again while a sweep turned any (at most
 /// [`SWEEPS`]; after the first, over the tets around the corners the last sweep moved), and
-/// returns how many turns it made. Its particles are moved as the tet
-/// needs, even into what they touch (the next substep's contacts push them out): a tet lying on
-/// the ground must be able to lift its corners off it (PERFORMANCE.md, "Cluster volume
-/// correction"). What of their velocities would fold it again is taken out, as a contact takes
-/// out a velocity into what it touches, so that the next substeps do not fold it again.
+/// returns how many turns it made. Its particles are moved as the tet needs, even into what
+/// they touch (the next substep's contacts push them out): a tet lying on the ground must be
+/// able to lift its corners off it (PERFORMANCE.md, "Cluster volume correction"). What of their
+/// velocities would fold it again is taken out, as a contact takes out a velocity into what it
+/// touches, so that the next substeps do not fold it again.
 pub(crate) fn turn_inverted_tets_back(
     mesh: &TetMesh,
     (positions, velocities, inv_masses): (&mut [Vec3], &mut [Vec3], &[f32]),
@@ -76,9 +76,8 @@ pub(crate) fn turn_inverted_tets_back(
         };
     }
     scratch.turned.clear();
-    for (t, tet) in mesh.tets().iter().enumerate() {
-        let volume = signed_volume(&tet.map(|i| positions[i as usize]));
-        if volume < 0.0 && turn_tet(mesh, t, volume, (positions, velocities, inv_masses)) {
+    for t in 0..mesh.tet_count() {
+        if turn_if_inside_out(mesh, t, (positions, velocities, inv_masses)) {
             scratch.turned.push(t as u32);
         }
     }
@@ -90,14 +89,25 @@ pub(crate) fn turn_inverted_tets_back(
         scratch.list_around_turned(mesh);
         for k in 0..scratch.tets.len() {
             let t = scratch.tets[k] as usize;
-            let volume = signed_volume(&mesh.tets()[t].map(|i| positions[i as usize]));
-            if volume < 0.0 && turn_tet(mesh, t, volume, (positions, velocities, inv_masses)) {
+            if turn_if_inside_out(mesh, t, (positions, velocities, inv_masses)) {
                 scratch.turned.push(t as u32);
             }
         }
         turned += scratch.turned.len() as u32;
     }
     turned
+}
+
+/// Whether tet `t` is inside out and was turned back: the check inline in the sweeps' loops,
+/// the turn ([`turn_tet`]) a call for the few that need it.
+#[inline(always)]
+fn turn_if_inside_out(
+    mesh: &TetMesh,
+    t: usize,
+    (positions, velocities, inv_masses): (&mut [Vec3], &mut [Vec3], &[f32]),
+) -> bool {
+    let volume = signed_volume(&mesh.tets()[t].map(|i| positions[i as usize]));
+    volume < 0.0 && turn_tet(mesh, t, volume, (positions, velocities, inv_masses))
 }
 
 /// Turns tet `t`, inside out at `volume`, back (see [`turn_inverted_tets_back`]); whether it
