@@ -2,7 +2,7 @@
 //! grid for one contact pass ([`prepare_soft_contacts`]), and, once a step, the particles
 //! that may meet another body's triangles within the step with the triangles they may meet
 //! ([`gather_soft_candidates`]), which every substep's contact pass then reads instead of a
-//! grid of its own.
+//! grid of its own, as does the step's predicted pass where they cover the whole step.
 //!
 //! The grid has cells of about a triangle's size, and a particle looks only in the cells its
 //! motion covers, so the cost grows with the boundary particles in the overlap of two bodies'
@@ -137,6 +137,7 @@ fn start_paths(body: &mut SoftBodyState, h: f32) {
     let c = &mut boundary.paths;
     c.start.resize(n, Vec3::ZERO);
     c.radius.resize(n, 0.0);
+    c.cover_the_step = true;
     if body.soft_contacts.is_none() {
         return;
     }
@@ -145,7 +146,9 @@ fn start_paths(body: &mut SoftBodyState, h: f32) {
         let i = i as usize;
         let x = body.positions[i];
         c.start[i] = x;
-        c.radius[i] = (h * body.velocities[i].length()).min(MAX_PATH * edge) + slack;
+        let path = h * body.velocities[i].length();
+        c.cover_the_step &= path <= MAX_PATH * edge;
+        c.radius[i] = path.min(MAX_PATH * edge) + slack;
         (lo, hi, largest) = (lo.min(x), hi.max(x), largest.max(c.radius[i]));
     }
     if !(lo.is_finite() && hi.is_finite() && largest.is_finite()) {

@@ -26,8 +26,10 @@
 //! Coulomb friction (`soft_lockstep.rs`), so a squashed jelly in a pile keeps its volume and
 //! holds up the one above it.
 //!
-//! The broad phase (`soft_broad_phase.rs`): the predicted and final passes search each body's
-//! grid of triangles; the substeps' passes read the candidates found once a step.
+//! The broad phase (`soft_broad_phase.rs`): the substeps' passes read the candidates found
+//! once a step, and so does the predicted pass when they cover the whole step's motion (no
+//! particle so fast that its path was cut short); otherwise it, and always the final pass,
+//! search each body's grid of triangles.
 
 use std::ops::DerefMut;
 
@@ -167,21 +169,27 @@ impl<'a> Arrays<'a> {
 
 /// One pass of soft contacts among `bodies` (every pair whose bounds overlap, and each body
 /// with itself where it asks for it), pairs that share no body at the same time on the
-/// threads of `parallel` (`PairRounds`: the result does not depend on them). A substep's pass reads the step's candidates
+/// threads of `parallel` (`PairRounds`: the result does not depend on them). A `listed` pass
+/// reads the step's candidates
 /// ([`gather_soft_candidates`](super::soft_broad_phase::gather_soft_candidates), which must
-/// have run this step); the others search a grid. Returns the contacts.
+/// have run this step and cover the pass: a substep's pass always, the predicted one when
+/// they cover the whole step); the others search a grid. Returns the contacts.
 pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
     bodies: &mut [B],
-    phase: SoftContactPhase,
+    (phase, listed): (SoftContactPhase, bool),
     rounds: &mut PairRounds,
     parallel: &dyn Parallel,
 ) -> u32 {
-    // A substep's preparation is a few flags; the others hash each body's triangles.
-    match phase {
-        SoftContactPhase::Substep(_) => bodies.iter_mut().for_each(|b| prepare_soft_pass(b, phase)),
-        _ => for_each_mut(bodies, parallel, &|body| prepare_soft_pass(body, phase)),
+    // A listed pass's preparation is a few flags; the others hash each body's triangles.
+    if listed {
+        bodies
+            .iter_mut()
+            .for_each(|b| prepare_soft_pass(b, phase, listed));
+    } else {
+        for_each_mut(bodies, parallel, &|body| {
+            prepare_soft_pass(body, phase, listed)
+        });
     }
-    let listed = matches!(phase, SoftContactPhase::Substep(_));
     rounds.plan(bodies, |one, other, [a, b]| {
         if listed {
             let met = |body: &SoftBodyState, partner: usize| {
@@ -193,7 +201,7 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
         }
     });
     rounds.run(bodies, parallel, &|one, other, slots| match other {
-        None => resolve_self(one, phase, slots[0]),
+        None => resolve_self(one, phase, listed, slots[0]),
         Some(other) => {
             let region = if listed { None } else { overlap(one, other) };
             resolve_pair(one, other, phase, region, slots)
@@ -201,10 +209,10 @@ pub(crate) fn soft_contact_pass<B: DerefMut<Target = SoftBodyState> + Send>(
     })
 }
 
-/// Prepares `body` for a pass of `phase` (its triangle grid, but for a substep's pass, which
+/// Prepares `body` for a pass of `phase` (its triangle grid, but for a `listed` pass, which
 /// reads the step's candidates). The pass then resolves the overlapping pairs and each body
 /// with itself.
-fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) {
+fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase, listed: bool) {
     if !phase.is_final() {
         body.scratch.soft_supports.clear();
     }
@@ -220,8 +228,10 @@ fn prepare_soft_pass(body: &mut SoftBodyState, phase: SoftContactPhase) {
         }
         return;
     }
-    let margin = body.soft_contacts.map_or(0.0, |s| s.thickness);
-    prepare_soft_contacts(body, phase.ahead(), margin);
+    if !listed {
+        let margin = body.soft_contacts.map_or(0.0, |s| s.thickness);
+        prepare_soft_contacts(body, phase.ahead(), margin);
+    }
 }
 
 /// Which particles of one body a pass looks at, and where it finds the triangles of the other
@@ -391,8 +401,8 @@ fn near_of<'a>(
     }
 }
 
-/// Contacts of a body with itself, if it asks for them.
-fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) -> u32 {
+/// Contacts of a body with itself, if it asks for them (from its candidates if `listed`).
+fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, listed: bool, slot: u32) -> u32 {
     let Some(settings) = body.soft_contacts.filter(|s| s.self_contacts) else {
         return 0;
     };
@@ -417,7 +427,7 @@ fn resolve_self(body: &mut SoftBodyState, phase: SoftContactPhase, slot: u32) ->
         supports: std::mem::take(&mut body.scratch.soft_supports).into(),
     };
     let boundary = &body.boundary;
-    let near = if let SoftContactPhase::Substep(_) = phase {
+    let near = if listed {
         Near::Listed {
             candidates: &boundary.candidates,
             list: boundary.candidates.against(slot),

@@ -82,10 +82,11 @@ impl<'a> LockstepBody<'a> {
     }
 }
 
-/// A soft-contact pass of `phase` among `bodies`, each body's contacts counted on it.
+/// A soft-contact pass of `phase` among `bodies` (on the step's candidates if `listed`), each
+/// body's contacts counted on it.
 fn counted_pass(
     bodies: &mut [LockstepBody],
-    phase: SoftContactPhase,
+    phase: (SoftContactPhase, bool),
     rounds: &mut PairRounds,
     parallel: &dyn Parallel,
 ) -> u32 {
@@ -113,7 +114,9 @@ impl DerefMut for LockstepBody<'_> {
 /// whose bounds overlap): a soft-contact pass on the predicted positions `x + h v`, then the
 /// substeps in lockstep, as many as the most any body in substeps needs (the paper's springs
 /// run their one substep with the first). The particles that may meet another body within the
-/// step are found once, after the first pass (`soft_broad_phase.rs`). In each substep every
+/// step are found once, before the first pass, which reads them when they cover the step
+/// (`soft_broad_phase.rs`; found again within the step for a particle past its radius). In
+/// each substep every
 /// body's shape solve runs, then one two-way soft-contact pass on the predicted positions over
 /// those candidates (when a body is in substeps), then
 /// each body's other substep stages, then what the volume impulses pushed into other bodies is
@@ -130,7 +133,16 @@ pub(crate) fn substeps_together(
 ) -> u32 {
     let counted = |bodies: &[LockstepBody]| bodies.iter().map(|b| b.contacts).sum::<u32>();
     let before = counted(bodies);
-    counted_pass(bodies, SoftContactPhase::Predicted(h), rounds, parallel);
+    // The step's candidates, found from where the particles start and how fast they move,
+    // serve its substeps' passes, and its predicted pass too where they cover the whole
+    // step's motion (no particle fast enough for its path to be cut short).
+    let gathered = bodies.iter().any(|b| !b.state.is_sleeping());
+    if gathered {
+        gather_soft_candidates(bodies, h, rounds, parallel);
+    }
+    let listed = gathered && bodies.iter().all(|b| b.boundary.paths.cover_the_step);
+    let predicted = (SoftContactPhase::Predicted(h), listed);
+    counted_pass(bodies, predicted, rounds, parallel);
     // Bodies meeting each other meet at up to the spread of their mean velocities (the
     // diagonal of the box around them): an impact between two bodies is met a fraction of a
     // cell a substep, as a landing on a collider is.
@@ -155,9 +167,6 @@ pub(crate) fn substeps_together(
         let b = &mut *body;
         b.state.plan_substeps(h, b.spheres, colliders, most);
     }
-    if most.is_some() {
-        gather_soft_candidates(bodies, h, rounds, parallel);
-    }
     for k in 0..most.unwrap_or(1).max(1) {
         for_each_mut(bodies, parallel, &|body| {
             if let Some(plan) = body.plan_for(k) {
@@ -177,12 +186,8 @@ pub(crate) fn substeps_together(
             if !bodies.iter().all(|b| candidates_hold(b)) {
                 gather_soft_candidates(bodies, h * (n - k) as f32 / n as f32, rounds, parallel);
             }
-            counted_pass(
-                bodies,
-                SoftContactPhase::Substep(h / n as f32),
-                rounds,
-                parallel,
-            );
+            let substep = (SoftContactPhase::Substep(h / n as f32), true);
+            counted_pass(bodies, substep, rounds, parallel);
         }
         for_each_mut(bodies, parallel, &|body| {
             if let Some(plan) = body.plan_for(k) {
@@ -213,7 +218,7 @@ pub(crate) fn final_contacts_together(
     parallel: &dyn Parallel,
     rounds: &mut PairRounds,
 ) -> u32 {
-    counted_pass(bodies, SoftContactPhase::Final, rounds, parallel)
+    counted_pass(bodies, (SoftContactPhase::Final, false), rounds, parallel)
 }
 
 /// A whole step of several bodies that meet each other, in the plugin's order
