@@ -116,11 +116,10 @@ impl DerefMut for LockstepBody<'_> {
 /// run their one substep with the first). The particles that may meet another body within the
 /// step are found once, before the first pass, which reads them when they cover the step
 /// (`soft_broad_phase.rs`; found again within the step for a particle past its radius). In
-/// each substep every
-/// body's shape solve runs, then one two-way soft-contact pass on the predicted positions over
-/// those candidates (when a body is in substeps), then
-/// each body's other substep stages, then what the volume impulses pushed into other bodies is
-/// handed to them. The bodies run one per job of `parallel` (their blocks on one thread each)
+/// each substep every body's shape solve runs, then one two-way soft-contact pass on the
+/// predicted positions over those candidates (when a body is in substeps), then each body's
+/// other substep stages, then what the volume impulses pushed into other bodies is handed to
+/// them. The bodies run one per job of `parallel` (their blocks on one thread each)
 /// wherever they do not touch each other's data, and the contact passes in order, so the
 /// result does not depend on it. `rounds` is the passes' scratch, kept by the caller.
 /// Returns the contacts.
