@@ -268,10 +268,6 @@ impl Listed<'_> {
 pub(crate) struct CandidatePaths {
     pub(crate) start: Vec<Vec3>,
     pub(crate) radius: Vec<f32>,
-    /// Whether every radius covers its particle's whole motion over the step at the velocity
-    /// it had when they were found (none cut at `MAX_PATH`): the step's predicted pass may
-    /// then read the candidates instead of a grid.
-    pub(crate) cover_the_step: bool,
 }
 
 impl SoftCandidates {

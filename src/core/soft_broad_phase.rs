@@ -113,6 +113,19 @@ pub(crate) fn overlap(one: &SoftBodyState, other: &SoftBodyState) -> Option<Aabb
         .then(|| Aabb::new(ra.mins.max(rb.mins), ra.maxs.min(rb.maxs)))
 }
 
+/// Whether every boundary particle of `body` moves at most [`MAX_PATH`] boundary edges in `h`
+/// at its velocity: candidates found now then cover its whole motion over the step (no path
+/// is cut short), as the step's predicted pass needs to read them.
+pub(crate) fn paths_fit_the_step(body: &SoftBodyState, h: f32) -> bool {
+    let fastest = MAX_PATH * body.boundary.longest_edge / h;
+    body.soft_contacts.is_none()
+        || body
+            .boundary
+            .particles
+            .iter()
+            .all(|&i| body.velocities[i as usize].length_squared() <= fastest * fastest)
+}
+
 /// Whether `body`'s candidates still hold: every boundary particle within its radius of where
 /// it was when they were found (a body without soft contacts has none to hold).
 pub(crate) fn candidates_hold(body: &SoftBodyState) -> bool {
@@ -137,7 +150,6 @@ fn start_paths(body: &mut SoftBodyState, h: f32) {
     let c = &mut boundary.paths;
     c.start.resize(n, Vec3::ZERO);
     c.radius.resize(n, 0.0);
-    c.cover_the_step = true;
     if body.soft_contacts.is_none() {
         return;
     }
@@ -146,9 +158,7 @@ fn start_paths(body: &mut SoftBodyState, h: f32) {
         let i = i as usize;
         let x = body.positions[i];
         c.start[i] = x;
-        let path = h * body.velocities[i].length();
-        c.cover_the_step &= path <= MAX_PATH * edge;
-        c.radius[i] = path.min(MAX_PATH * edge) + slack;
+        c.radius[i] = (h * body.velocities[i].length()).min(MAX_PATH * edge) + slack;
         (lo, hi, largest) = (lo.min(x), hi.max(x), largest.max(c.radius[i]));
     }
     if !(lo.is_finite() && hi.is_finite() && largest.is_finite()) {

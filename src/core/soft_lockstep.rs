@@ -12,7 +12,9 @@ use glam::Vec3;
 use super::body::SoftBodyState;
 use super::colliders::{ColliderInstance, RigidSphereState};
 use super::parallel::{Parallel, Serial, for_each_mut};
-use super::soft_broad_phase::{PairRounds, candidates_hold, gather_soft_candidates};
+use super::soft_broad_phase::{
+    PairRounds, candidates_hold, gather_soft_candidates, paths_fit_the_step,
+};
 use super::soft_contacts::{SoftContactPhase, soft_contact_pass};
 use super::substep_plan::SubstepPlan;
 use super::substep_plan::SubstepStage;
@@ -114,12 +116,12 @@ impl DerefMut for LockstepBody<'_> {
 /// whose bounds overlap): a soft-contact pass on the predicted positions `x + h v`, then the
 /// substeps in lockstep, as many as the most any body in substeps needs (the paper's springs
 /// run their one substep with the first). The particles that may meet another body within the
-/// step are found once, before the first pass, which reads them when they cover the step
-/// (`soft_broad_phase.rs`; found again within the step for a particle past its radius). In
-/// each substep every body's shape solve runs, then one two-way soft-contact pass on the
-/// predicted positions over those candidates (when a body is in substeps), then each body's
-/// other substep stages, then what the volume impulses pushed into other bodies is handed to
-/// them. The bodies run one per job of `parallel` (their blocks on one thread each)
+/// step are found once (`soft_broad_phase.rs`): before the first pass, which then reads them,
+/// where they cover the whole step, else after it; again within the step for a particle past
+/// its radius. In each substep every body's shape solve runs, then one two-way soft-contact
+/// pass on the predicted positions over those candidates (when a body is in substeps), then
+/// each body's other substep stages, then what the volume impulses pushed into other bodies is
+/// handed to them. The bodies run one per job of `parallel` (their blocks on one thread each)
 /// wherever they do not touch each other's data, and the contact passes in order, so the
 /// result does not depend on it. `rounds` is the passes' scratch, kept by the caller.
 /// Returns the contacts.
@@ -133,15 +135,20 @@ pub(crate) fn substeps_together(
     let counted = |bodies: &[LockstepBody]| bodies.iter().map(|b| b.contacts).sum::<u32>();
     let before = counted(bodies);
     // The step's candidates, found from where the particles start and how fast they move,
-    // serve its substeps' passes, and its predicted pass too where they cover the whole
-    // step's motion (no particle fast enough for its path to be cut short).
-    let gathered = bodies.iter().any(|b| !b.state.is_sleeping());
-    if gathered {
+    // serve its substeps' passes, and its predicted pass too where they cover the whole step's
+    // motion (no particle fast enough for its path to be cut short); else they are found after
+    // it, from the velocities it leaves.
+    let listed = bodies.iter().any(|b| !b.state.is_sleeping())
+        && bodies.iter().all(|b| paths_fit_the_step(b, h));
+    if listed {
         gather_soft_candidates(bodies, h, rounds, parallel);
     }
-    let listed = gathered && bodies.iter().all(|b| b.boundary.paths.cover_the_step);
-    let predicted = (SoftContactPhase::Predicted(h), listed);
-    counted_pass(bodies, predicted, rounds, parallel);
+    counted_pass(
+        bodies,
+        (SoftContactPhase::Predicted(h), listed),
+        rounds,
+        parallel,
+    );
     // Bodies meeting each other meet at up to the spread of their mean velocities (the
     // diagonal of the box around them): an impact between two bodies is met a fraction of a
     // cell a substep, as a landing on a collider is.
@@ -165,6 +172,9 @@ pub(crate) fn substeps_together(
     for body in bodies.iter_mut() {
         let b = &mut *body;
         b.state.plan_substeps(h, b.spheres, colliders, most);
+    }
+    if most.is_some() && !listed {
+        gather_soft_candidates(bodies, h, rounds, parallel);
     }
     for k in 0..most.unwrap_or(1).max(1) {
         for_each_mut(bodies, parallel, &|body| {
